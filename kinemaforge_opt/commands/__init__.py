@@ -1,0 +1,1 @@
+"""Subcommands of the ``kinemaforge`` command: one module each, exposing ``register(subparsers)``."""

@@ -1,0 +1,66 @@
+"""Numeric Pinocchio model from an :class:`ArticulatedModel`.
+
+Layout (shared with the symbolic bridge): one Pinocchio joint per movable joint, in the model's
+topological order; continuous joints are 1-DoF revolute (q is the angle, not cos/sin); links
+attached by fixed joints are merged into the body of the joint they ride on; every link gets a
+BODY frame named after it, so ``data.oMf[model.getFrameId(name)]`` is ``T_world_link``.
+Joint damping, friction and springs are not part of a ``pin.Model`` (apply them as forces);
+armature is (``model.armature``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from .articulated import ArticulatedModel
+
+
+def _joint_model(joint):
+    a = np.asarray(joint.axis, dtype=float)
+    if joint.type in ("revolute", "continuous"):
+        return pin.JointModelRevoluteUnaligned(a)
+    if joint.type == "prismatic":
+        return pin.JointModelPrismaticUnaligned(a)
+    return pin.JointModelHelicalUnaligned(a, joint.pitch)
+
+
+def build_pin_model(model: ArticulatedModel, check_dynamics: bool = True) -> pin.Model:
+    """A numeric ``pin.Model`` with the same q/v order as ``model.joint_names``.
+
+    Raises :class:`~kinemaforge_opt.errors.MissingDynamicsError` when ``check_dynamics`` and a
+    movable joint moves no mass."""
+    if check_dynamics:
+        model.check_dynamics()
+    pm = pin.Model()
+    pm.name = model.name
+    pm.gravity = pin.Motion(np.asarray(model.gravity, dtype=float), np.zeros(3))
+    # For every link: the Pinocchio joint it rides on and its placement in that joint's frame.
+    ride: dict[str, tuple[int, pin.SE3]] = {model.root.name: (0, pin.SE3.Identity())}
+    frame_of: dict[str, int] = {}
+    frame_of[model.root.name] = pm.addFrame(
+        pin.Frame(model.root.name, 0, 0, pin.SE3.Identity(), pin.FrameType.BODY)
+    )
+    for j in model.joints:
+        parent_jid, T_pjoint_parentlink = ride[j.parent]
+        T_pjoint_joint = T_pjoint_parentlink * pin.SE3(j.T_parent_joint)
+        if j.type == "fixed":
+            ride[j.child] = (parent_jid, T_pjoint_joint)
+        else:
+            jid = pm.addJoint(parent_jid, _joint_model(j), T_pjoint_joint, j.name)
+            pm.armature[pm.joints[jid].idx_v] = j.dynamics.armature
+            if j.limits is not None:
+                pm.lowerPositionLimit[pm.joints[jid].idx_q] = j.limits.lower
+                pm.upperPositionLimit[pm.joints[jid].idx_q] = j.limits.upper
+            ride[j.child] = (jid, pin.SE3.Identity())
+        jid, T_joint_link = ride[j.child]
+        frame_of[j.child] = pm.addFrame(
+            pin.Frame(j.child, jid, frame_of[j.parent], T_joint_link, pin.FrameType.BODY)
+        )
+    for link in model.links:
+        if link.inertial is None:
+            continue
+        jid, T_joint_link = ride[link.name]
+        Y = pin.Inertia(link.inertial.mass, np.asarray(link.inertial.com), np.asarray(link.inertial.inertia))
+        pm.appendBodyToJoint(jid, Y, T_joint_link)
+    return pm
