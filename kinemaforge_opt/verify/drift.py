@@ -1,0 +1,124 @@
+"""Drift: replay a recording in Drake and measure how far the model wanders from it.
+
+The replay starts from the recording's first state (q, and v or finite differences of q) under
+its recorded tau (:mod:`.simulate`).  At each horizon h (seconds after the first sample) the
+simulated and reference link positions are compared in Cartesian space:
+
+    drift_m(h) = max over moving links ℓ and points p ∈ {origin of ℓ, COM of ℓ} of
+                 |T_world_ℓ(q_sim(t0+h)) p − T_world_ℓ(q_ref(t0+h)) p|      [m]
+
+(forward kinematics by Pinocchio).  The reference q_ref(t) is the recording linearly
+interpolated in time; **beyond the recording's end it is the recording's last q held constant**
+(the object is assumed to come to rest where the recording leaves it) while the replay keeps the
+last recorded tau applied.  A horizon past the end therefore measures whether the model settles
+where the real object did.  ``joint_rms(h)`` is the RMS of q_sim − q_ref over all joints and
+samples in [t0, t0+h] (rad and m mixed when joint types are mixed).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import DataError
+from ..io.recording import Recording
+from ..model import ArticulatedModel
+from ..model.pinocchio import build_pin_model
+from .energy import model_ordered, recorded_velocity
+from .simulate import V_EPS, Trajectory, simulate_at
+
+DEFAULT_HORIZONS_S = (1.0, 5.0, 10.0, 20.0, 50.0)
+
+
+@dataclass(frozen=True, eq=False)
+class DriftReport:
+    """Drift of a replay against its recording.
+
+    horizons_s: (H,) horizons [s] after the recording's first sample.
+    drift_m: (H,) link-position error at each horizon [m] (module docs).
+    max_drift_m: (H,) largest link-position error over [t0, t0+h] [m].
+    joint_rms: (H,) joint-space RMS error over [t0, t0+h] [rad or m].
+    beyond_recording: (H,) True where t0+h is after the last recorded sample (reference = rest).
+    simulated: the replay, times relative to t0.  reference_q: (T, n) q_ref at ``simulated.t``.
+    """
+
+    horizons_s: np.ndarray
+    drift_m: np.ndarray
+    max_drift_m: np.ndarray
+    joint_rms: np.ndarray
+    beyond_recording: np.ndarray
+    simulated: Trajectory
+    reference_q: np.ndarray
+
+
+def drift(
+    model: ArticulatedModel,
+    recording: Recording,
+    horizons_s=DEFAULT_HORIZONS_S,
+    discrete: bool = True,
+    v_eps: float = V_EPS,
+) -> DriftReport:
+    """Replay ``recording`` with ``model`` up to the longest horizon and measure the drift.
+
+    Output samples are the recording's own times, plus each horizon, plus a grid at the
+    recording's median period beyond its end.  Raises :class:`DataError` naming the joints when
+    the recording's joints and the model's differ, or for non-positive horizons."""
+    rec = model_ordered(model, recording)
+    h = np.asarray(horizons_s, dtype=float).reshape(-1)
+    if h.size == 0 or np.any(h <= 0) or not np.all(np.isfinite(h)):
+        raise DataError(f"horizons_s must be positive finite seconds, got {list(horizons_s)}")
+    t_rec = rec.t - rec.t[0]
+    t_max = float(h.max())
+    grid_beyond = np.arange(t_rec[-1], t_max, rec.dt)
+    t_out = np.unique(np.concatenate([t_rec[t_rec <= t_max], h, grid_beyond, [t_max]]))
+    v0 = recorded_velocity(rec)[0]
+    sim = simulate_at(model, rec.q[0], v0, t_out, rec if rec.tau is not None else None, discrete, v_eps)
+    q_ref = np.column_stack([np.interp(t_out, t_rec, rec.q[:, j]) for j in range(model.nq)])
+
+    err_m = _link_point_error(model, sim.q, q_ref)
+    dq2 = np.sum((sim.q - q_ref) ** 2, axis=1)
+    idx = np.searchsorted(t_out, h)
+    drift_m = err_m[idx]
+    max_drift = np.array([err_m[: i + 1].max() for i in idx])
+    rms = np.array([np.sqrt(dq2[: i + 1].mean() / model.nq) for i in idx])
+    return DriftReport(h, drift_m, max_drift, rms, h > t_rec[-1], sim, q_ref)
+
+
+def link_points(model: ArticulatedModel, q: np.ndarray) -> np.ndarray:
+    """(T, P, 3) world positions [m] of the origin and COM of every moving link for q (T, n)."""
+    pm = build_pin_model(model)
+    data = pm.createData()
+    moving = [j.child for j in model.joints if _moves(model, j.child)]
+    frames = [(pm.getFrameId(name), _com(model, name)) for name in moving]
+    out = np.empty((len(q), 2 * len(frames), 3))
+    for i, qi in enumerate(np.asarray(q, dtype=float)):
+        pin.framesForwardKinematics(pm, data, qi)
+        for k, (fid, com) in enumerate(frames):
+            T = data.oMf[fid]
+            out[i, 2 * k] = T.translation
+            out[i, 2 * k + 1] = T.act(com)
+    return out
+
+
+def _link_point_error(model: ArticulatedModel, q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
+    """(T,) max over moving-link points of the distance between their positions under q_a and q_b."""
+    d = np.linalg.norm(link_points(model, q_a) - link_points(model, q_b), axis=2)
+    return d.max(axis=1)
+
+
+def _moves(model: ArticulatedModel, link: str) -> bool:
+    """True if a movable joint lies on the path from the root to ``link``."""
+    by_child = {j.child: j for j in model.joints}
+    while link in by_child:
+        j = by_child[link]
+        if j.is_movable:
+            return True
+        link = j.parent
+    return False
+
+
+def _com(model: ArticulatedModel, link: str) -> np.ndarray:
+    inertial = model.link(link).inertial
+    return np.zeros(3) if inertial is None else np.asarray(inertial.com, dtype=float)

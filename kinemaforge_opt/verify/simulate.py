@@ -1,0 +1,183 @@
+"""Simulate an :class:`ArticulatedModel` in Drake: free response or replay of a recorded force.
+
+The generalised force fed to the plant's applied-generalised-force input is
+
+    τ_in(t, v) = τ_rec(t) − f ⊙ tanh(v / v_eps)
+
+- τ_rec: the recording's ``tau`` linearly interpolated in time (first-order hold), time measured
+  from the recording's first sample; after its last sample the last value is held.
+- Coulomb friction f (``JointDynamics.coulomb``) as a *smooth sign*: −f·tanh(v/v_eps), not a
+  stiction model.  v_eps (rad/s or m/s, default :data:`V_EPS`) is the velocity below which the
+  friction force fades out linearly; a joint "stopped" by friction creeps with a time constant
+  M_jj·v_eps/f and a load below f makes it creep at v_eps·atanh(load/f) instead of sticking.
+  The discrete plant applies this force explicitly, which is stable only while the friction's
+  slope f/v_eps stays below the joint inertia per step, so there v_eps is raised per joint to
+  max(v_eps, 4·h·f_j/M_jj(q0)) with h the 1 ms step and M_jj the mass-matrix diagonal at q0.
+Damping, springs, armature and limits are in the plant (:mod:`.plant`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.systems.analysis import Simulator
+from pydrake.symbolic import Variable, tanh
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import Adder, SymbolicVectorSystem, TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
+
+from ..errors import DataError, require_finite
+from ..io.recording import Recording
+from ..model import ArticulatedModel
+from .energy import mechanical_energy, model_ordered
+from .plant import DISCRETE_TIME_STEP_S, build_plant
+
+V_EPS = 1e-3
+"""Default smoothing velocity of the Coulomb friction's tanh [rad/s or m/s]."""
+
+CONTINUOUS_ACCURACY = 1e-7
+"""Target accuracy of the continuous plant's error-controlled integrator (Drake RK3)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """A simulated motion.
+
+    t: (T,) times [s] from the start of the simulation.  joint_names: the n joints, in q order.
+    q: (T, n) positions [rad or m]; v: (T, n) velocities [rad/s or m/s];
+    energy: (T,) kinetic + potential (gravity + springs) energy [J], see :mod:`.energy`.
+    wall_time_s: seconds the simulation took.
+    """
+
+    t: np.ndarray
+    joint_names: tuple[str, ...]
+    q: np.ndarray
+    v: np.ndarray
+    energy: np.ndarray
+    wall_time_s: float
+
+
+def simulate(
+    model: ArticulatedModel,
+    q0,
+    v0,
+    duration_s: float,
+    tau: Recording | None = None,
+    dt_out: float = 0.01,
+    discrete: bool = True,
+    v_eps: float = V_EPS,
+) -> Trajectory:
+    """Simulate ``model`` from (q0, v0) ((n,) each, q order) for ``duration_s`` seconds.
+
+    tau: None for a free response, or a recording whose ``tau`` is applied (see module docs);
+    its joints must be the model's.  dt_out: output sample period [s].  discrete: 1 ms discrete
+    plant (joint limits enforced) or a continuous plant with an error-controlled integrator
+    (limits ignored, FACTS.md)."""
+    if not (duration_s > 0 and dt_out > 0):
+        raise DataError(f"duration_s and dt_out must be > 0, got {duration_s} and {dt_out}")
+    t_out = np.arange(0.0, duration_s + 0.5 * dt_out, dt_out)
+    return simulate_at(model, q0, v0, t_out, tau, discrete, v_eps)
+
+
+def simulate_at(
+    model: ArticulatedModel,
+    q0,
+    v0,
+    t_out: np.ndarray,
+    tau: Recording | None = None,
+    discrete: bool = True,
+    v_eps: float = V_EPS,
+) -> Trajectory:
+    """Like :func:`simulate` but sampled at the increasing times ``t_out`` (T,) [s], t_out[0] >= 0."""
+    n = model.nq
+    q0 = np.asarray(q0, dtype=float).reshape(-1)
+    v0 = np.asarray(v0, dtype=float).reshape(-1)
+    for name, a in (("q0", q0), ("v0", v0)):
+        if a.shape != (n,):
+            raise DataError(f"{name} must have shape ({n},) for joints {list(model.joint_names)}, got {a.shape}")
+        require_finite(name, a)
+    t_out = np.asarray(t_out, dtype=float)
+    if t_out.ndim != 1 or t_out.size == 0 or t_out[0] < 0 or np.any(np.diff(t_out) <= 0):
+        raise DataError("t_out must be a non-empty, strictly increasing array of times >= 0")
+    if tau is not None:
+        tau = model_ordered(model, tau)
+        if tau.tau is None:
+            raise DataError("the recording passed as tau has no tau:<joint> columns")
+
+    dp = build_plant(model, discrete)
+    plant = dp.plant
+    builder = DiagramBuilder()
+    builder.AddSystem(plant)
+    sources = []
+    coulomb = np.array([j.dynamics.coulomb for j in model.movable_joints])
+    if np.any(coulomb > 0):
+        eps = np.full(n, float(v_eps))
+        if discrete:
+            ctx = plant.CreateDefaultContext()
+            plant.SetPositions(ctx, q0)
+            M_diag = np.diag(plant.CalcMassMatrix(ctx))
+            eps = np.maximum(eps, 4.0 * DISCRETE_TIME_STEP_S * coulomb / M_diag)
+        sources.append(_friction_system(builder, plant, coulomb, eps, discrete))
+    if tau is not None:
+        sources.append(builder.AddSystem(TrajectorySource(_force_trajectory(tau, t_out[-1]))).get_output_port())
+    if sources:
+        port = sources[0]
+        if len(sources) > 1:
+            adder = builder.AddSystem(Adder(len(sources), n))
+            for i, s in enumerate(sources):
+                builder.Connect(s, adder.get_input_port(i))
+            port = adder.get_output_port()
+        builder.Connect(port, plant.get_applied_generalized_force_input_port())
+    diagram = builder.Build()
+
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    plant.SetPositions(plant_context, q0)
+    plant.SetVelocities(plant_context, v0)
+    if not discrete:
+        simulator.get_mutable_integrator().set_target_accuracy(CONTINUOUS_ACCURACY)
+    simulator.Initialize()
+
+    q = np.empty((t_out.size, n))
+    v = np.empty((t_out.size, n))
+    start = time.perf_counter()
+    for i, ti in enumerate(t_out):
+        if ti > context.get_time():
+            simulator.AdvanceTo(ti)
+        q[i] = plant.GetPositions(plant_context)
+        v[i] = plant.GetVelocities(plant_context)
+    wall = time.perf_counter() - start
+    return Trajectory(t_out, model.joint_names, q, v, mechanical_energy(model, q, v), wall)
+
+
+def _friction_system(builder: DiagramBuilder, plant, coulomb: np.ndarray, eps: np.ndarray, discrete: bool):
+    """Output port of a symbolic system x = [q; v] -> −f ⊙ tanh(v / eps), fed by the plant state.
+
+    Evaluated in C++ (a Python LeafSystem cost ~3 s per 50 s of 1 ms steps).  Drake's
+    SymbolicVectorSystem needs a state, so it carries one inert variable (z' = 0, or z+ = z with
+    the plant's period in the discrete case so it adds no integrator events)."""
+    nq, nv = plant.num_positions(), plant.num_velocities()
+    x = [Variable(f"x{i}") for i in range(nq + nv)]
+    z = Variable("inert")
+    out = [-coulomb[i] * tanh(x[nq + i] / eps[i]) for i in range(nv)]
+    if discrete:
+        system = SymbolicVectorSystem(state=[z], input=x, dynamics=[z], output=out,
+                                      time_period=DISCRETE_TIME_STEP_S)
+    else:
+        system = SymbolicVectorSystem(state=[z], input=x, dynamics=[0.0 * z], output=out)
+    builder.AddSystem(system)
+    builder.Connect(plant.get_state_output_port(), system.get_input_port())
+    return system.get_output_port()
+
+
+def _force_trajectory(tau: Recording, t_end: float) -> PiecewisePolynomial:
+    """First-order hold of tau(t − t_0), extended to ``t_end`` by holding the last sample."""
+    t = tau.t - tau.t[0]
+    values = tau.tau
+    if t_end > t[-1]:
+        t = np.append(t, t_end + 1.0)
+        values = np.vstack([values, values[-1]])
+    return PiecewisePolynomial.FirstOrderHold(t, values.T)
