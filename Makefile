@@ -1,0 +1,48 @@
+# kinemaforge_opt — set-up, tests, demo, benchmarks.  Every target builds .venv from nothing
+# (idempotent: re-runs only redo what changed).
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.kinemaforge-installed
+# Debian packages the project needs at run time (open3d: libGL/EGL/X11; OpenMP: libgomp;
+# MuJoCo headless rendering: EGL) and at build time (the native bridge: g++).
+SYSTEM_PACKAGES := g++ libgl1 libegl1 libgomp1 libx11-6
+NATIVE_SOURCES := $(wildcard kinemaforge_opt/native/*.cpp kinemaforge_opt/native/*.hpp)
+
+.PHONY: demo test test-all bench sysdeps clean
+
+demo: $(STAMP)
+	$(VENV)/bin/kinemaforge demo -o out/demo
+
+test: $(STAMP)
+	$(PY) -m pytest -q -m "not slow"
+
+test-all: $(STAMP)
+	$(PY) -m pytest -q
+
+bench: $(STAMP)
+	$(VENV)/bin/kinemaforge bench
+
+# Installs missing Debian packages only (apt-get update runs only when something is missing).
+sysdeps:
+	@missing=$$(for p in $(SYSTEM_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+	  echo "installing system packages: $$missing"; \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq $$missing; \
+	fi
+
+$(VENV)/bin/python:
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip "setuptools>=68" wheel
+
+# The native bridge compiles against the exact casadi/libpinocchio installed in .venv
+# (no build isolation), so build and runtime versions are the same files.
+$(STAMP): $(VENV)/bin/python pyproject.toml setup.py $(NATIVE_SOURCES) | sysdeps
+	$(PY) -m pip install -q "casadi==3.8.2" "libpinocchio==4.1.0"
+	$(PY) -m pip install -q --no-build-isolation -e ".[dev]"
+	touch $(STAMP)
+
+clean:
+	rm -rf $(VENV) build *.egg-info kinemaforge_opt/native/_kfbridge*.so out
