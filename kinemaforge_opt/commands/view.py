@@ -1,0 +1,92 @@
+"""``kinemaforge view OUT``: a meshcat scene of an output folder, saved as OUT/scene.html."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..errors import InputFileError, KinemaforgeError
+
+DESCRIPTION = """\
+Build a 3-D scene of an output folder and save it as OUT/scene.html, a single HTML file
+that opens in a browser without a server (meshcat viewer inlined).
+
+The scene shows OUT/model.urdf (meshes from OUT, else its boxes/cylinders/spheres, or a
+sphere at each link's centre of mass), every joint axis as a yellow arrow and its limits as
+an orange arc (revolute) or segment (prismatic).  When OUT holds a joint-space recording
+(OUT/recording.csv, else the first OUT/*.csv with q:<joint> columns for the model's joints)
+the scene animates the recorded motion and, in grey, the Drake replay of it from the same
+initial state under the recorded tau.  Point clouds, if OUT/clouds.npz exists (one (N, 3)
+array in metres per part, named by part), are drawn coloured by part.
+"""
+
+EPILOG = """\
+examples:
+  kinemaforge view out/cal                 writes out/cal/scene.html and prints its path
+  kinemaforge view out/cal --no-replay     recorded motion only (no Drake)
+"""
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "view",
+        help="meshcat scene of an output folder (OUT/scene.html)",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("out", metavar="OUT", help="a folder holding model.urdf (e.g. from calibrate)")
+    p.add_argument("--no-replay", action="store_true", help="do not simulate the recording in Drake")
+    p.set_defaults(func=run)
+
+
+def _find_recording(out: Path, model):
+    """The recording in ``out`` that fits ``model`` (None if there is none)."""
+    from ..io.recording import read_recording
+
+    candidates = [out / "recording.csv"] if (out / "recording.csv").is_file() else sorted(out.glob("*.csv"))
+    for path in candidates:
+        try:
+            rec = read_recording(path)
+        except KinemaforgeError:
+            continue  # not a joint-space recording (e.g. tracks.csv)
+        if set(model.joint_names) <= set(rec.joint_names):
+            return rec.select(model.joint_names)
+    return None
+
+
+def _clouds(out: Path) -> dict:
+    import numpy as np
+
+    path = out / "clouds.npz"
+    if not path.is_file():
+        return {}
+    try:
+        with np.load(path) as z:
+            return {k: z[k] for k in z.files}
+    except (OSError, ValueError) as e:
+        raise InputFileError(f"{path}: not a readable .npz of per-part (N, 3) point arrays ({e})") from None
+
+
+def run(args) -> int:
+    from ..model import read_urdf
+    from ..viz import build_view
+
+    out = Path(args.out)
+    if not out.is_dir():
+        raise InputFileError(f"output folder {str(out)!r} does not exist")
+    model = read_urdf(out / "model.urdf")
+    rec = _find_recording(out, model)
+    recorded = simulated = None
+    if rec is not None:
+        recorded = (rec.t - rec.t[0], rec.q)
+        if not args.no_replay:
+            from ..verify import simulate_at
+            from ..verify.energy import recorded_velocity
+
+            traj = simulate_at(model, rec.q[0], recorded_velocity(rec)[0], rec.t - rec.t[0],
+                               rec if rec.tau is not None else None)
+            simulated = (traj.t, traj.q)
+    scene = build_view(model, mesh_dir=out, recorded=recorded, simulated=simulated, clouds=_clouds(out))
+    print(scene.save(out / "scene.html"))
+    return 0
