@@ -81,7 +81,7 @@ class Dynamics:
     def poses(self, q, theta=None) -> np.ndarray:
         """Numeric link poses: (L, 4, 4) ``Ts_world_link`` for one configuration q (nq,)."""
         theta = self.theta0 if theta is None else theta
-        stacked = np.asarray(self.link_poses(np.asarray(q, float), np.asarray(theta, float)))
+        stacked = self.link_poses(np.asarray(q, float), np.asarray(theta, float)).full()
         return stacked.reshape(len(self.link_names), 4, 4)
 
 

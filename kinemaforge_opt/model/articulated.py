@@ -191,6 +191,8 @@ class Joint:
         n = np.linalg.norm(a)
         if a.shape != (3,) or not n > 1e-12:
             raise ModelError(f"joint {self.name!r} axis must be a non-zero 3-vector, got {a.tolist()}")
+        if self.type == "fixed":  # a fixed joint has no axis; store a canonical one
+            a, n = np.array([1.0, 0.0, 0.0]), 1.0
         object.__setattr__(self, "axis", _frozen_array(a / n, (3,), f"joint {self.name!r} axis"))
         object.__setattr__(self, "pitch", float(self.pitch))
         if self.type != "helical" and self.pitch != 0.0:

@@ -1,0 +1,110 @@
+"""Drake free responses against closed-form solutions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from verify_models import G, pendulum, slider
+
+from kinemaforge_opt.errors import DataError
+from kinemaforge_opt.io.recording import Recording
+from kinemaforge_opt.model import ArticulatedModel, Inertial, Joint, JointDynamics, Link
+from kinemaforge_opt.model.pinocchio import build_pin_model
+from kinemaforge_opt.verify import build_plant, energy_residual, mechanical_energy, simulate
+
+
+def _period(t, q):
+    up = t[1:][(q[:-1] < 0) & (q[1:] >= 0)]
+    return float(np.mean(np.diff(up)))
+
+
+@pytest.mark.parametrize("discrete, rtol", [(False, 2e-4), (True, 2e-3)])
+def test_pendulum_small_angle_period(discrete, rtol):
+    L = 0.5
+    tr = simulate(pendulum(L), [0.02], [0.0], 6.0, dt_out=1e-3, discrete=discrete)
+    assert _period(tr.t, tr.q[:, 0]) == pytest.approx(2 * np.pi * np.sqrt(L / G), rel=rtol)
+
+
+@pytest.mark.parametrize("discrete, atol", [(False, 1e-6), (True, 2e-3)])
+def test_damped_slider_decays_exponentially(discrete, atol):
+    m, b, v0 = 2.0, 3.0, 1.0
+    tr = simulate(slider(m, damping=b), [0.0], [v0], 3.0, dt_out=0.01, discrete=discrete)
+    decay = np.exp(-b * tr.t / m)
+    np.testing.assert_allclose(tr.v[:, 0], v0 * decay, atol=atol)
+    np.testing.assert_allclose(tr.q[:, 0], v0 * m / b * (1 - decay), atol=atol)
+
+
+def test_spring_rests_at_rest_plus_gravity_sag():
+    m, k, rest = 2.0, 400.0, 0.3
+    model = slider(m, axis=(0, 0, 1), damping=40.0, spring_stiffness=k, spring_rest=rest)
+    tr = simulate(model, [rest], [0.0], 3.0, dt_out=0.1, discrete=True)
+    assert tr.q[-1, 0] == pytest.approx(rest - m * G / k, abs=1e-6)
+
+
+def test_armature_adds_to_the_oscillating_inertia():
+    m, a, k = 2.0, 0.5, 80.0
+    tr = simulate(slider(m, armature=a, spring_stiffness=k), [0.1], [0.0], 4.0, dt_out=1e-3, discrete=False)
+    assert _period(tr.t, tr.q[:, 0]) == pytest.approx(2 * np.pi * np.sqrt((m + a) / k), rel=1e-3)
+
+
+@pytest.mark.parametrize("discrete", [False, True])
+def test_coulomb_friction_stops_slider_at_analytic_distance(discrete):
+    m, f, v0 = 2.0, 3.0, 1.5
+    tr = simulate(slider(m, coulomb=f), [0.0], [v0], 1.5, dt_out=0.01, discrete=discrete)
+    assert tr.q[-1, 0] == pytest.approx(v0**2 / (2 * f / m), abs=2e-3)
+    assert abs(tr.v[-1, 0]) < 1e-6
+
+
+def test_energy_is_conserved_without_damping():
+    tr = simulate(pendulum(0.5), [1.2], [0.0], 10.0, dt_out=0.01, discrete=False)
+    swing = np.ptp(tr.energy - mechanical_energy(pendulum(0.5), tr.q, np.zeros_like(tr.v)))
+    assert np.ptp(tr.energy) < 1e-6 * swing
+    rec = Recording(tr.t, tr.joint_names, tr.q, tr.v)
+    assert energy_residual(pendulum(0.5), rec) < 1e-3
+
+
+def test_energy_residual_balances_damping_work():
+    model = pendulum(0.5, damping=0.2)
+    tr = simulate(model, [1.0], [0.0], 5.0, dt_out=0.002, discrete=False)
+    rec = Recording(tr.t, tr.joint_names, tr.q, tr.v)
+    assert energy_residual(model, rec) < 1e-3
+    assert energy_residual(pendulum(0.5, damping=0.0), rec) > 0.5
+
+
+def test_plant_matches_pinocchio_on_a_tree_with_every_joint_kind():
+    rng = np.random.default_rng(3)
+    kinds = ("revolute", "prismatic", "helical", "continuous", "fixed")
+    links, joints = [Link("base")], []
+    for i, kind in enumerate(kinds):
+        R = pin.exp3(rng.normal(size=3))
+        links.append(Link(f"l{i}", Inertial(1.0 + i, rng.normal(size=3) * 0.1, R @ np.diag([0.05, 0.06, 0.08]) @ R.T)))
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = pin.exp3(rng.normal(size=3)), rng.normal(size=3) * 0.3
+        joints.append(Joint(f"j{i}", kind, links[i].name, f"l{i}", T_parent_joint=T, axis=rng.normal(size=3),
+                            pitch=0.05 if kind == "helical" else 0.0,
+                            dynamics=JointDynamics(armature=0.01 * i, spring_stiffness=2.0 if kind != "helical" else 0.0,
+                                                   spring_rest=0.1)))
+    model = ArticulatedModel("tree", tuple(links), tuple(joints))
+    plant = build_plant(model, discrete=False).plant
+    ctx = plant.CreateDefaultContext()
+    pm = build_pin_model(model)
+    data = pm.createData()
+    q0 = np.zeros(model.nq)
+    E_ref = None
+    for _ in range(3):
+        q, v = rng.normal(size=model.nq), rng.normal(size=model.nq)
+        plant.SetPositions(ctx, q)
+        plant.SetVelocities(ctx, v)
+        np.testing.assert_allclose(plant.CalcMassMatrix(ctx), pin.crba(pm, data, q), atol=1e-9)
+        E_drake = plant.CalcKineticEnergy(ctx) + plant.CalcPotentialEnergy(ctx)
+        E_ours = mechanical_energy(model, [q], [v])[0]
+        if E_ref is None:
+            E_ref = E_drake - E_ours
+        assert E_drake - E_ours == pytest.approx(E_ref, abs=1e-9)
+    del q0
+
+
+def test_bad_initial_state_is_named():
+    with pytest.raises(DataError, match="q0 must have shape"):
+        simulate(pendulum(), [0.0, 1.0], [0.0], 1.0)
