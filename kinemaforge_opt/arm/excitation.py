@@ -67,6 +67,15 @@ class Limits:
     v_max: np.ndarray
     a_max: np.ndarray
 
+    def within(self, q_lower: np.ndarray, q_upper: np.ndarray, margin: float = 0.1) -> "Limits":
+        """These limits narrowed to also keep ``margin`` [rad] inside another range (n,) each,
+        e.g. a real arm's joint ranges."""
+        lo = np.maximum(self.q_lower, np.asarray(q_lower) + margin)
+        hi = np.minimum(self.q_upper, np.asarray(q_upper) - margin)
+        if np.any(lo >= hi):
+            raise ModelError(f"joint ranges do not overlap for joints {np.flatnonzero(lo >= hi).tolist()}")
+        return Limits(lo, hi, self.v_max, self.a_max)
+
 
 def model_limits(
     model: ArticulatedModel,
