@@ -3,8 +3,10 @@
 Energy is evaluated with Pinocchio (kinematics and gravity) plus the model's joint springs and
 armature, so the same definition serves recorded states and Drake-simulated states:
 
-    E(q, v) = ½ vᵀ M(q) v                          (Pinocchio kinetic energy; M includes the
-                                                      armature, like Drake's reflected inertia)
+    E(q, v) = ½ vᵀ M(q) v                          (M from Pinocchio's CRBA, armature included
+                                                      like Drake's reflected inertia; pin 4.1's
+                                                      computeKineticEnergy counts the armature of
+                                                      some joint types only, so it is not used)
             − Σ_links m g·p_com                       (gravity potential, zero at p = 0)
             + ½ Σ_j k_j (q_j − rest_j)²              (joint springs)
 
@@ -33,7 +35,9 @@ def mechanical_energy(model: ArticulatedModel, q: np.ndarray, v: np.ndarray) -> 
     rest = np.array([d.spring_rest for d in dyn])
     E = np.empty(len(q))
     for i, (qi, vi) in enumerate(zip(q, v)):
-        E[i] = pin.computeKineticEnergy(pm, data, qi, vi) + pin.computePotentialEnergy(pm, data, qi)
+        M = pin.crba(pm, data, qi)
+        M = np.triu(M) + np.triu(M, 1).T
+        E[i] = 0.5 * vi @ M @ vi + pin.computePotentialEnergy(pm, data, qi)
     return E + 0.5 * ((q - rest) ** 2 @ k)
 
 
