@@ -183,18 +183,19 @@ def simulate(model: ArticulatedModel, handles: dict[str, Handle], effects: tuple
     w = 2 * np.pi * plan.bandwidth_hz
     q_start = None
     for step in range(n_steps + 1):
+        mujoco.mj_step1(mj, data)  # kinematics, mass matrix and bias forces of the current state
         t = step * dt
-        k, tau_s = divmod(t, plan.stroke_s)
-        k = min(int(k), len(strokes) - 1)
-        i, goal = strokes[k]
+        k = int(t // plan.stroke_s)
+        tau_s = t - k * plan.stroke_s
+        i, goal = strokes[min(k, len(strokes) - 1)]
         h = handles[names[i]]
         body = mj.body(h.link).id
         p_grip = data.xpos[body] + data.xmat[body].reshape(3, 3) @ np.asarray(h.p_link)
         f_world = np.zeros(3)
         tau_hand = np.zeros(len(names))
-        if tau_s < 1e-12:
+        if tau_s < 0.5 * dt:
             q_start = data.qpos[qadr[i]]
-        if tau_s < plan.push_s:
+        if k < len(strokes) and tau_s < plan.push_s:
             s = tau_s / plan.push_s
             q_goal = lower[i] + goal * (upper[i] - lower[i])
             dq, al, T = q_goal - q_start, plan.release_speed, plan.push_s
@@ -227,6 +228,6 @@ def simulate(model: ArticulatedModel, handles: dict[str, Handle], effects: tuple
             break
         data.qfrc_applied[:] = 0.0
         data.qfrc_applied[dof] = tau_hand + [fe(data.qpos[a], data.qvel[d]) for fe, a, d in zip(forces, qadr, dof)]
-        mujoco.mj_step(mj, data)
+        mujoco.mj_step2(mj, data)  # forces, constraints and integration
     a = {k: np.asarray(v) for k, v in rec.items()}
     return Episode(a["t"], names, a["q"], a["v"], a["tau"], a["p"], a["f"], model.link_names, a["T"])
