@@ -1,0 +1,292 @@
+"""Fit each candidate joint relation — rigid, prismatic, revolute, helical — to a relative motion.
+
+Each fit is a closed-form initialiser (chordal mean, principal line, screw / Plücker axis from
+the rotation null space, plane + circle fit for position-only tracks) followed by a robust
+refinement (scipy ``least_squares``, soft-L1 loss on residuals normalised by the estimated
+noise σ, so the loss switches to linear beyond ~1σ).  Latent joint values (one per sample) are
+refined jointly with a sparse Jacobian.
+
+Scoring (Sturm et al., JAIR 2011): BIC = χ² + k ln N with χ² the robust sum of normalised
+squared residuals, k the model's parameters *including* its N latent joint values (so pure
+noise around a static pose is rigid, not a prismatic joint of one noisy coordinate per sample).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.sparse import lil_matrix
+from scipy.spatial.transform import Rotation
+
+from ..spatial import normalize
+from .motion import RelativeMotion
+
+JOINT_TYPES = ("rigid", "prismatic", "revolute", "helical")
+# Refinement budget: well-posed fits converge in 5–40 evaluations; a helix on a short arc is
+# nearly degenerate (pitch trades against axis tilt) and is stopped here rather than polished.
+MAX_NFEV = 60
+
+
+@dataclass(frozen=True, eq=False)
+class JointHypothesis:
+    """One fitted relation between a parent and a child.
+
+    type: 'rigid' | 'prismatic' | 'revolute' | 'helical'.
+    axis_world (3,), origin_world (3,): the joint line in the world at the first common sample
+    [unit, m] (None for rigid).  For revolute/helical the origin is the point of the axis closest
+    to the child's first position (the circle centre for position-only tracks); for prismatic it
+    is the child's position at q = 0.  axis_parent, origin_parent: the same line in the parent frame.
+    pitch: helical pitch [m/rad] (0 otherwise).  radius: distance of the child origin from the
+    axis [m] (revolute/helical), else None.
+    q: (N,) joint values per common sample [rad or m], 0 at the first sample (zeros for rigid).
+    residual_rms: RMS position residual [m].  residual_autocorr: lag-1 autocorrelation of the
+    residual vectors (near 1 = systematic model error, near 0 = white noise).
+    noise_sigma: the pair's estimated white position noise per coordinate [m].
+    chi2: robust χ² of the normalised residuals.  n_params: global parameters; n_latent: latent
+    joint values (N for moving joints, 0 for rigid).  bic: χ² + (n_params + n_latent) ln N here;
+    the graph rescores it for correlated residuals (see ``graph.score``).
+    confidence: ρ ∈ [0, 1], set by the graph (probability of this type for the pair times the
+    fit's consistency with the noise level); 1.0 until scored.
+    """
+
+    type: str
+    axis_world: np.ndarray | None
+    origin_world: np.ndarray | None
+    axis_parent: np.ndarray | None
+    origin_parent: np.ndarray | None
+    pitch: float
+    radius: float | None
+    q: np.ndarray
+    residual_rms: float
+    residual_autocorr: float
+    noise_sigma: float
+    chi2: float
+    n_params: int
+    n_latent: int
+    n_samples: int
+    bic: float
+    confidence: float = 1.0
+
+
+def _tangent_basis(a: np.ndarray) -> np.ndarray:
+    """(3, 2) orthonormal basis of the plane perpendicular to unit ``a``."""
+    helper = np.eye(3)[np.argmin(np.abs(a))]
+    u = normalize(np.cross(a, helper))
+    return np.stack([u, np.cross(a, u)], axis=1)
+
+
+def _rot(axis_angles: np.ndarray) -> np.ndarray:
+    """(N, 3) rotation vectors -> (N, 3, 3) matrices."""
+    return Rotation.from_rotvec(axis_angles).as_matrix()
+
+
+def _robust_chi2(r: np.ndarray) -> float:
+    """Sum of the soft-L1 loss 2(sqrt(1 + r²) - 1) over normalised residuals (≈ r² near 0)."""
+    return float(np.sum(2.0 * (np.sqrt(1.0 + r**2) - 1.0)))
+
+
+def _solve(fun, x0: np.ndarray, n_global: int, n_latent: int, rows_per_sample: int):
+    """Robust sparse least squares: global parameters touch every residual, latent value i only
+    its own ``rows_per_sample`` residuals."""
+    m = n_latent * rows_per_sample
+    if n_latent:
+        S = lil_matrix((m, n_global + n_latent), dtype=int)
+        S[:, :n_global] = 1
+        for i in range(n_latent):
+            S[i * rows_per_sample : (i + 1) * rows_per_sample, n_global + i] = 1
+    else:
+        S = None
+    res = least_squares(
+        fun, x0, jac_sparsity=S, loss="soft_l1", f_scale=1.0, method="trf", x_scale="jac", max_nfev=MAX_NFEV
+    )
+    return res.x, res.fun
+
+
+def _finish(kind, motion, axis_p, origin_p, pitch, radius, q, r_norm, pos_res, n_params) -> JointHypothesis:
+    n = motion.n
+    chi2 = _robust_chi2(r_norm)
+    n_latent = 0 if kind == "rigid" else n
+    bic = chi2 + (n_params + n_latent) * np.log(n)
+    e = pos_res.reshape(n, 3)
+    autocorr = float(np.sum(e[1:] * e[:-1]) / max(np.sum(e * e), 1e-300))
+    R0, p0 = motion.T_world_parent0[:3, :3], motion.T_world_parent0[:3, 3]
+    axis_w = None if axis_p is None else R0 @ axis_p
+    origin_w = None if origin_p is None else R0 @ origin_p + p0
+    rms = float(np.sqrt(np.mean(np.sum(pos_res.reshape(n, 3) ** 2, axis=1))))
+    return JointHypothesis(
+        kind, axis_w, origin_w, axis_p, origin_p, float(pitch), radius, np.asarray(q, float), rms,
+        autocorr, motion.sigma_position, chi2, int(n_params), n_latent, n, float(bic),
+    )
+
+
+def _orient(axis: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Flip the axis so the joint value increases from the first to the last sample; q(0) = 0."""
+    q = q - q[0]
+    if q[-1] < 0:
+        return -axis, -q
+    return axis, q
+
+
+# --------------------------------------------------------------------------- full pose
+
+
+def _rot_residual(R_model: np.ndarray, Rs: np.ndarray) -> np.ndarray:
+    return Rotation.from_matrix(np.einsum("nji,njk->nik", R_model, Rs)).as_rotvec()
+
+
+def _chordal_mean(Rs: np.ndarray) -> np.ndarray:
+    U, _, Vt = np.linalg.svd(Rs.sum(axis=0))
+    return U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+
+
+def _fit_pose(kind: str, m: RelativeMotion) -> JointHypothesis:
+    Rs, ps, sp, sr, n = m.Rs, m.positions, m.sigma_position, m.sigma_rotation, m.n
+    if kind == "rigid":
+        R0 = _chordal_mean(Rs)
+
+        def model(x):
+            R = _rot(np.tile(x[:3], (n, 1))) @ R0
+            return R, np.tile(x[3:6], (n, 1))
+
+        x0, n_glob, k = np.r_[np.zeros(3), np.median(ps, axis=0)], 6, 6
+    elif kind == "prismatic":
+        R0 = _chordal_mean(Rs)
+        c = ps.mean(axis=0)
+        a0 = np.linalg.svd(ps - c)[2][0]
+        B = _tangent_basis(a0)
+        d0 = (ps - c) @ a0
+
+        def model(x):
+            R = _rot(np.tile(x[:3], (n, 1))) @ R0
+            a = normalize(a0 + B @ x[3:5])
+            return R, c + B @ x[5:7] + x[7:, None] * a
+
+        x0, n_glob, k = np.r_[np.zeros(7), d0], 7, 7
+    else:  # revolute / helical: screw axis from the rotation null space (Plücker line)
+        ref = n // 2
+        dR = np.einsum("nij,kj->nik", Rs, Rs[ref])  # R_t R_ref^T
+        dp = ps - np.einsum("nij,j->ni", dR, ps[ref])
+        a0 = np.linalg.svd((dR - np.eye(3)).reshape(-1, 3))[2][-1]
+        phi = _rot_residual(np.tile(np.eye(3), (n, 1, 1)), dR) @ a0
+        h0 = float(np.dot(dp @ a0, phi) / max(np.dot(phi, phi), 1e-300)) if kind == "helical" else 0.0
+        A = (np.eye(3) - dR).reshape(-1, 3)
+        c0 = np.linalg.lstsq(A, (dp - h0 * phi[:, None] * a0).reshape(-1), rcond=None)[0]
+        B = _tangent_basis(a0)
+        R_ref, p_ref = Rs[ref], ps[ref]
+        nh = 1 if kind == "helical" else 0
+
+        def model(x):
+            a = normalize(a0 + B @ x[:2])
+            cc = c0 + B @ x[2:4]
+            Rr = _rot(x[4:7][None])[0] @ R_ref
+            pr = p_ref + x[7:10]
+            h = x[10] if nh else 0.0
+            th = x[10 + nh :]
+            Ra = _rot(th[:, None] * a)
+            return Ra @ Rr, cc + np.einsum("nij,j->ni", Ra, pr - cc) + h * th[:, None] * a
+
+        x0, n_glob = np.r_[np.zeros(10), [h0] * nh, phi], 10 + nh
+        k = 9 + nh  # one gauge freedom (angle offset vs reference orientation)
+
+    def fun(x):
+        R, p = model(x)
+        return np.concatenate([(ps - p) / sp, _rot_residual(R, Rs) / sr], axis=1).ravel()
+
+    x, r = _solve(fun, x0, n_glob, x0.size - n_glob, 6)
+    r = r.reshape(n, 6)
+    pos_res = r[:, :3] * sp
+    if kind == "rigid":
+        return _finish(kind, m, None, None, 0.0, None, np.zeros(n), r.ravel(), pos_res, k)
+    if kind == "prismatic":
+        a = normalize(a0 + B @ x[3:5])
+        axis, q = _orient(a, x[7:])
+        origin = c + B @ x[5:7] + x[7] * a
+        return _finish(kind, m, axis, origin, 0.0, None, q, r.ravel(), pos_res, k)
+    a = normalize(a0 + B @ x[:2])
+    cc = c0 + B @ x[2:4]
+    h = x[10] if kind == "helical" else 0.0
+    axis, q = _orient(a, x[n_glob:])
+    origin = cc + a * np.dot(ps[0] - cc, a)
+    radius = float(np.linalg.norm((ps[0] - cc) - a * np.dot(ps[0] - cc, a)))
+    # Flipping the axis negates the angle too, so the pitch h is unchanged.
+    return _finish(kind, m, axis, origin, h, radius, q, r.ravel(), pos_res, k)
+
+
+# --------------------------------------------------------------------------- position only
+
+
+def _fit_points(kind: str, m: RelativeMotion) -> JointHypothesis:
+    ps, sp, n = m.positions, m.sigma_position, m.n
+    mean = ps.mean(axis=0)
+    _, _, Vt = np.linalg.svd(ps - mean)
+    if kind == "rigid":
+        model = lambda x: np.tile(x, (n, 1))  # noqa: E731
+        x0, n_glob, k = np.median(ps, axis=0), 3, 3
+    elif kind == "prismatic":
+        a0 = Vt[0]
+        B = _tangent_basis(a0)
+
+        def model(x):
+            return mean + B @ x[2:4] + x[4:, None] * normalize(a0 + B @ x[:2])
+
+        x0, n_glob, k = np.r_[np.zeros(4), (ps - mean) @ a0], 4, 4
+    else:  # revolute / helical: plane (normal = axis) + algebraic circle fit in that plane
+        U0 = Vt[:2].T
+        a0 = np.cross(U0[:, 0], U0[:, 1])  # right-handed (u, v, a): angles run about +a
+        uv = (ps - mean) @ U0
+        sol = np.linalg.lstsq(np.c_[2 * uv, np.ones(n)], np.sum(uv**2, axis=1), rcond=None)[0]
+        centre0 = mean + U0 @ sol[:2]
+        r0 = float(np.sqrt(max(sol[2] + sol[:2] @ sol[:2], 0.0)))
+        th0 = np.unwrap(np.arctan2(uv[:, 1] - sol[1], uv[:, 0] - sol[0]))
+        nh = 1 if kind == "helical" else 0
+        B = _tangent_basis(a0)
+
+        def frame(x):
+            a = normalize(a0 + B @ x[3:5])
+            u = normalize(U0[:, 0] - a * (U0[:, 0] @ a))
+            return a, u, np.cross(a, u)
+
+        def model(x):
+            a, u, v = frame(x)
+            th = x[6 + nh :]
+            h = x[6] if nh else 0.0
+            return x[:3] + x[5] * (np.cos(th)[:, None] * u + np.sin(th)[:, None] * v) + h * th[:, None] * a
+
+        x0 = np.r_[centre0, 0.0, 0.0, r0, [0.0] * nh, th0]  # helix starts as the circle
+        n_glob = 6 + nh
+        k = 6 + nh
+
+    def fun(x):
+        return ((ps - model(x)) / sp).ravel()
+
+    x, _ = _solve(fun, x0, n_glob, x0.size - n_glob, 3)
+    r = fun(x)
+    pos_res = r * sp
+    if kind == "rigid":
+        return _finish(kind, m, None, None, 0.0, None, np.zeros(n), r, pos_res, k)
+    if kind == "prismatic":
+        a = normalize(a0 + B @ x[:2])
+        axis, q = _orient(a, x[4:])
+        origin = mean + B @ x[2:4] + x[4] * a
+        return _finish(kind, m, axis, origin, 0.0, None, q, r, pos_res, k)
+    a, _, _ = frame(x)
+    th = x[n_glob:]
+    # The circle's angle runs about +a; flipping the axis negates the angle and keeps the pitch.
+    axis, q = _orient(a, th)
+    h = x[6] if kind == "helical" else 0.0
+    centre = x[:3] + (h * th[0] * a if kind == "helical" else 0.0)
+    return _finish(kind, m, axis, centre, h, float(abs(x[5])), q, r, pos_res, k)
+
+
+def fit_relation(kind: str, motion: RelativeMotion) -> JointHypothesis:
+    """Fit one relation type (see JOINT_TYPES) to ``motion``; returns the unscored hypothesis."""
+    if kind not in JOINT_TYPES:
+        raise ValueError(f"unknown relation type {kind!r}; expected one of {JOINT_TYPES}")
+    return (_fit_pose if motion.Rs is not None else _fit_points)(kind, motion)
+
+
+def fit_all(motion: RelativeMotion) -> dict[str, JointHypothesis]:
+    """Every relation type fitted to ``motion``, keyed by type."""
+    return {kind: fit_relation(kind, motion) for kind in JOINT_TYPES}
