@@ -32,7 +32,7 @@ from kinemaforge_opt.arm.excitation import (  # noqa: E402
     model_limits,
     random_fourier,
 )
-from kinemaforge_opt.arm.idim import filtered_states, fit_idim_ls, torque_rms  # noqa: E402
+from kinemaforge_opt.arm.idim import batched, fit_idim_ls, held_out_rms  # noqa: E402
 from kinemaforge_opt.arm.mujoco_real import SensorNoise, concealed_panda, kitchen_panda, record_plan  # noqa: E402
 from kinemaforge_opt.arm.panda import load_panda  # noqa: E402
 from kinemaforge_opt.io.recording import write_recording  # noqa: E402
@@ -40,11 +40,6 @@ from kinemaforge_opt.io.recording import write_recording  # noqa: E402
 KP = np.array([600.0, 600.0, 600.0, 600.0, 250.0, 150.0, 50.0])  # recording PD gains [N·m/rad]
 KD = np.array([50.0, 50.0, 50.0, 20.0, 20.0, 20.0, 10.0])  # [N·m·s/rad]
 CT_KP, CT_KD = 100.0, 20.0  # computed-torque outer loop [1/s², 1/s]
-
-
-def predict_with(id_fn, q, v, a):
-    """Torques (T, n) of a single-sample inverse-dynamics callable over a trajectory."""
-    return np.array([id_fn(q[k], v[k], a[k]) for k in range(len(q))])
 
 
 def main() -> None:
@@ -100,9 +95,8 @@ def main() -> None:
         header = "   held-out torque RMS [N·m]     " + " ".join(f"{j[-6:]:>7}" for j in nominal.joint_names) + "    mean"
         print(header)
         for hname, h in held.items():
-            q, v, a, _ = filtered_states(h)
             for mname, id_fn in models.items():
-                r = torque_rms(predict_with(id_fn, q, v, a), h.tau)
+                r = held_out_rms(batched(id_fn), h)
                 print(f"   {hname:<19} {mname:<9} " + " ".join(f"{x:7.3f}" for x in r) + f" {r.mean():7.3f}")
         print("   computed-torque tracking RMS [mrad] on the second trajectory")
         for mname, id_fn in models.items():
@@ -112,7 +106,7 @@ def main() -> None:
             axes[row, 0].semilogy(res.t, 1e3 * np.linalg.norm(res.error, axis=1), label=mname)
             axes[row, 1].bar(np.arange(nominal.nq) + 0.4 * list(models).index(mname), r, width=0.4, label=mname)
         axes[row, 0].set(title=f"{arm.name}: |q - q_des|", xlabel="t [s]", ylabel="[mrad]")
-        axes[row, 1].set(title=f"{arm.name}: RMS per joint", xlabel="joint", ylabel="[mrad]")
+        axes[row, 1].set(title=f"{arm.name}: RMS per joint", xlabel="joint", ylabel="[mrad]", yscale="log")
         axes[row, 1].set_xticks(np.arange(nominal.nq) + 0.2, [str(i + 1) for i in range(nominal.nq)])
         for ax in axes[row]:
             ax.legend()

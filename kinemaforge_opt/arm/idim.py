@@ -156,3 +156,20 @@ def fit_idim_ls(
 def torque_rms(tau_pred: np.ndarray, tau_meas: np.ndarray) -> np.ndarray:
     """Per-joint RMS of tau_pred - tau_meas, both (T, n) [N·m] -> (n,)."""
     return np.sqrt(np.mean((np.asarray(tau_pred) - np.asarray(tau_meas)) ** 2, axis=0))
+
+
+def held_out_rms(predict, rec: Recording, cutoff_hz: float = 8.0, trim_s: float = 0.1,
+                 filtered_torque: bool = False) -> np.ndarray:
+    """Per-joint RMS [N·m] (n,) of ``predict(q, v, a)`` ((T, n) arrays -> (T, n) torques) against
+    the measured torque of ``rec``, states from :func:`filtered_states`, ``trim_s`` [s] dropped
+    at each end.  filtered_torque: compare with the equally filtered torque instead of the raw one
+    (removes sensor noise and the controller's high-frequency torque that filtered accelerations
+    cannot follow)."""
+    q, v, a, tau_f = filtered_states(rec, cutoff_hz)
+    m = (rec.t >= rec.t[0] + trim_s) & (rec.t <= rec.t[-1] - trim_s)
+    return torque_rms(predict(q[m], v[m], a[m]), (tau_f if filtered_torque else rec.tau)[m])
+
+
+def batched(id_fn):
+    """A single-sample callable tau = id(q, v, a) ((n,) arrays) as a (T, n) -> (T, n) one."""
+    return lambda q, v, a: np.array([id_fn(q[k], v[k], a[k]) for k in range(len(q))])
