@@ -108,6 +108,7 @@ def _tiny_cases() -> dict[str, Case]:
         "tiny_door_clean": Case("tiny_door_clean", "cabinet", 0, noise=CLEAN, expected=_expect(()), **small),
         "tiny_drawer": Case("tiny_drawer", "drawer", 0, expected=_expect(()), **small),
         "tiny_laptop": Case("tiny_laptop", "laptop", 0, expected=_expect(()), **small),
+        "tiny_fridge": Case("tiny_fridge", "refrigerator", 0, expected=_expect(()), **small),
         "tiny_multi": Case("tiny_multi", "cabinet_multi", 0, expected=_expect(()), **small),
         "tiny_moving": Case("tiny_moving", "microwave", 0, views=1, frames=4, width=64, height=48,
                             moving_camera=True, expected=_expect(())),

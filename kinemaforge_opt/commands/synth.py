@@ -63,7 +63,7 @@ def run(args) -> int:
     if args.list:
         for name, case in catalogue.CASES.items():
             effects = ", ".join(e.type for e in case.effects) or "none"
-            print(f"{name:50s} {case.category:14s} effects: {effects}")
+            print(f"{name:50s} {case.category:14s} effects: {effects}\n    expected: {case.expected}")
         return 0
     if not args.case or not args.out:
         raise KinemaforgeError("synth needs a CASE and -o DIR (or --list)")

@@ -20,6 +20,7 @@ limit_contact          -stiffness·(q - value) beyond the stop (one-sided)      
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -131,8 +132,6 @@ def true_model(model: ArticulatedModel, effects) -> ArticulatedModel:
     friction added, the spring set, the joint axis tilted (in the joint frame) and the child
     link's mass and inertia scaled (for a single-link subtree this scales the joint-space
     inertia and gravity load by the same ratio)."""
-    import dataclasses
-
     effects = tuple(effects)
     check_effects(model, effects)
     for e in effects:

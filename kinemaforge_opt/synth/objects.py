@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from ..errors import UnknownNameError
 from ..io.atomic import atomic_path
 from ..model import ArticulatedModel, Geometry, Joint, JointLimits, Link
 from ..spatial import inverse, make_transform
@@ -280,7 +281,5 @@ GENERATORS = {
 def make_object(category: str, seed: int) -> SynthObject:
     """The procedural object of ``category`` (one of :data:`GENERATORS`) for ``seed``."""
     if category not in GENERATORS:
-        from ..errors import UnknownNameError
-
         raise UnknownNameError("object category", category, GENERATORS)
     return GENERATORS[category](seed)
