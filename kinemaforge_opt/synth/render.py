@@ -74,7 +74,7 @@ class SceneRenderer:
                  link_names: tuple[str, ...], wall_y: float | None = None, floor_half_size: float = 6.0):
         self.link_names = tuple(link_names)
         self.meshes = [meshes[n] for n in self.link_names]
-        self.albedo = np.array([[0, 0, 0], [0.6, 0.6, 0.6]] + [colors[n] for n in self.link_names], dtype=np.float32)
+        self.albedo = np.array([[0, 0, 0], [0.62, 0.57, 0.48]] + [colors[n] for n in self.link_names], dtype=np.float32)
         s = floor_half_size
         env = [trimesh.creation.box(extents=[2 * s, 2 * s, 0.02], transform=trimesh.transformations.translation_matrix([0, 0, -0.01]))]
         if wall_y is not None:
