@@ -178,7 +178,7 @@ def write_tracks(path: str | os.PathLike, tracks: PoseTracks) -> None:
 
 def read_sturm_log(path: str | os.PathLike, name: str | None = None) -> PoseTracks:
     """Read one Sturm articulation log (``x y z`` per line, metres) as a position-only PoseTracks
-    with one track (named ``name``, default ``<kind>/<stem>`` from the path); time = sample index."""
+    with one track (named ``name``, default ``<kind>_<stem>`` from the path); time = sample index."""
     path = Path(path)
     if not path.is_file():
         raise InputFileError(f"Sturm log {str(path)!r} does not exist or is not a file")
@@ -197,4 +197,4 @@ def read_sturm_log(path: str | os.PathLike, name: str | None = None) -> PoseTrac
     if len(rows) < 2:
         raise InputFileError(f"{path}: expected at least 2 samples 'x y z', got {len(rows)}")
     P = np.array(rows)[None]
-    return PoseTracks(np.arange(P.shape[1], dtype=float), (name or f"{path.parent.name}/{path.stem}",), P)
+    return PoseTracks(np.arange(P.shape[1], dtype=float), (name or f"{path.parent.name}_{path.stem}",), P)

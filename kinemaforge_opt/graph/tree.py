@@ -1,0 +1,233 @@
+"""The kinematic constraint graph and its reconciliation into a kinematic tree.
+
+Nodes: the static world ("world", the ground) and every track.  For each ordered pair whose
+parent has a frame (the world or a full-pose track) the child's relative motion is fitted with
+every joint type; a position-only track cannot be a parent (forbidden edge: a point has no frame).
+
+Edge confidence ρ(i→j, type) = P(parent = i | j) · P(type | i, j): the type posterior from
+:mod:`graph.score` and a parent posterior exp(−BIC*/2) normalised over j's candidate parents
+(BIC* = the pair's best type).  Both are kept in log space.
+
+Tracks joined by a confident rigid edge (rigid posterior ≥ MERGE_PROBABILITY and rigid residual
+within SIGNIFICANCE·σ of the noise) are merged first
+(union–find); the group holding the world is the base, so the static part is *found* from the
+data.  The tree is the maximum spanning arborescence on log ρ (networkx, Edmonds) rooted at the
+base: the root's in-edges are EXCLUDED, as networkx has no root argument — this is the
+contextual preference for the ground/static part as root.  ``ArborescenceIterator`` yields the
+k best trees.  ``method="greedy"`` is the ablation without a graph: attach groups one at a time,
+least-moving first, each to the already placed group that explains it best.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from itertools import islice
+
+import networkx as nx
+import numpy as np
+from networkx.algorithms.tree.branchings import ArborescenceIterator
+
+from ..errors import DataError
+from ..io.tracks import PoseTracks
+from .fit import JointHypothesis, fit_all
+from .motion import WORLD, relative_motion
+from .score import SIGNIFICANCE, log_posterior, score_pair
+
+# A pair is merged into one rigid part when the rigid type is at least this probable (a 95 %
+# decision level on the type posterior, not a data-tuned value).
+MERGE_PROBABILITY = 0.95
+
+
+@dataclass(frozen=True, eq=False)
+class TreeJoint:
+    """One joint of a tree: ``child`` moves relative to ``parent`` as ``hypothesis`` says;
+    ``hypothesis.confidence`` is the edge's ρ = P(parent) · P(type)."""
+
+    name: str
+    parent: str
+    child: str
+    hypothesis: JointHypothesis
+
+    @property
+    def type(self) -> str:
+        return self.hypothesis.type
+
+
+@dataclass(frozen=True, eq=False)
+class KinematicTree:
+    """A kinematic tree over merged parts.
+
+    root: the base part's name (holds the world).  parts: {part name: member track names}.
+    joints: parent-before-child order.  log_score: Σ log ρ over the joints (higher is better).
+    """
+
+    root: str
+    parts: dict[str, tuple[str, ...]]
+    joints: tuple[TreeJoint, ...]
+    log_score: float
+
+
+@dataclass(frozen=True, eq=False)
+class GraphResult:
+    """best: the chosen tree; alternatives: the next best trees (k-best, best first, excluding
+    ``best``).  edges: {(parent part, child part): {type: scored JointHypothesis}} for every
+    allowed edge of the constraint graph.  method: 'graph' or 'greedy'."""
+
+    best: KinematicTree
+    alternatives: tuple[KinematicTree, ...]
+    edges: dict[tuple[str, str], dict[str, JointHypothesis]]
+    method: str
+
+
+def _pair_fits(tracks: PoseTracks) -> dict[tuple[str, str], dict[str, JointHypothesis]]:
+    """Scored fits for every allowed ordered pair (parent, child); indices None = world."""
+    names = (WORLD,) + tracks.names
+    out = {}
+    for i, parent in enumerate(names):
+        if i > 0 and not tracks.has_orientation:
+            continue  # forbidden: a position-only track has no frame to be a parent
+        for j, child in enumerate(names[1:], start=1):
+            if i == j:
+                continue
+            motion = relative_motion(tracks, None if i == 0 else i - 1, j - 1)
+            out[(parent, child)] = score_pair(fit_all(motion))
+    return out
+
+
+def _merge(tracks: PoseTracks, fits) -> dict[str, tuple[str, ...]]:
+    """Union–find over confident rigid pairs -> {part name: members}; the part holding the world
+    is named 'base', others after their first member."""
+    parent = {n: n for n in (WORLD,) + tracks.names}
+
+    def find(x):
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for (a, b), hyps in fits.items():
+        rigid = hyps["rigid"]
+        # Confident *and* adequate: rigid is the most probable type and its residual is at the
+        # noise level (when no type fits, rigid can win by default; that is no reason to merge).
+        if rigid.confidence >= MERGE_PROBABILITY and rigid.residual_rms <= SIGNIFICANCE * np.sqrt(3.0) * rigid.noise_sigma:
+            ra, rb = find(a), find(b)
+            if ra != rb:
+                keep = WORLD if WORLD in (ra, rb) else min(ra, rb)
+                parent[rb if keep == ra else ra] = keep
+    groups: dict[str, list[str]] = {}
+    for n in parent:
+        groups.setdefault(find(n), []).append(n)
+    return {("base" if root == WORLD else root): tuple(m) for root, m in groups.items()}
+
+
+def _representative(members: tuple[str, ...], tracks: PoseTracks) -> str:
+    """The world if present, else the member observed most often."""
+    if WORLD in members:
+        return WORLD
+    obs = tracks.observed().sum(axis=1)
+    return max(members, key=lambda m: obs[tracks.names.index(m)])
+
+
+def _part_edges(tracks, fits, parts):
+    """{(parent part, child part): scored hypotheses} between part representatives, with the
+    confidence of each type set to ρ = P(parent) · P(type)."""
+    rep = {p: _representative(m, tracks) for p, m in parts.items()}
+    raw = {(pa, pb): fits[(rep[pa], rep[pb])] for pa in parts for pb in parts if (rep[pa], rep[pb]) in fits}
+    edges = {}
+    for child in parts:
+        best = {pa: _best_type(hyps) for (pa, pb), hyps in raw.items() if pb == child}
+        if not best:
+            continue
+        log_parent = log_posterior(_parent_bic(best))
+        for pa in best:
+            edges[(pa, child)] = {
+                k: replace(h, confidence=float(np.exp(log_parent[pa]) * h.confidence))
+                for k, h in raw[(pa, child)].items()
+            }
+    return edges
+
+
+def _parent_bic(best: dict[str, JointHypothesis]) -> dict[str, float]:
+    """BIC of each candidate parent's best relation on a *common* scale for the child: the
+    σ and effective sample fraction of the child's best-explained pair (per-pair scaling would
+    normalise a bad parent's misfit away)."""
+    ref = min(best.values(), key=lambda h: max(h.residual_rms, np.sqrt(3.0) * h.noise_sigma))
+    sigma2 = max(ref.residual_rms**2 / 3.0, ref.noise_sigma**2)
+    s = max((1.0 - float(np.clip(ref.residual_autocorr, 0.0, 1.0))) / (1.0 + max(ref.residual_autocorr, 0.0)), 1.0 / ref.n_samples)
+    return {
+        pa: s * h.n_samples * h.residual_rms**2 / sigma2 + (h.n_params + s * h.n_latent) * np.log(h.n_samples)
+        for pa, h in best.items()
+    }
+
+
+def _best_type(hyps: dict[str, JointHypothesis]) -> JointHypothesis:
+    return max(hyps.values(), key=lambda h: h.confidence)
+
+
+def _log(x: float) -> float:
+    return float(np.log(x)) if x > 0 else -1e300
+
+
+def _tree(root, parts, edges, arcs) -> KinematicTree:
+    """Order arcs parent-before-child and name joints j0, j1, …"""
+    children: dict[str, list[str]] = {}
+    for a, b in arcs:
+        children.setdefault(a, []).append(b)
+    order, stack = [], [root]
+    while stack:
+        node = stack.pop()
+        for c in sorted(children.get(node, []), reverse=True):
+            order.append((node, c))
+            stack.append(c)
+    joints = tuple(
+        TreeJoint(f"j{i}", a, b, _best_type(edges[(a, b)])) for i, (a, b) in enumerate(order)
+    )
+    return KinematicTree(root, parts, joints, sum(_log(j.hypothesis.confidence) for j in joints))
+
+
+def _graph_trees(parts, edges, k_best: int) -> list[KinematicTree]:
+    G = nx.DiGraph()
+    G.add_nodes_from(parts)
+    for (a, b), hyps in edges.items():
+        G.add_edge(a, b, weight=_log(_best_type(hyps).confidence))
+    excluded = [(a, "base") for a in G.predecessors("base")]
+    trees = []
+    for A in islice(ArborescenceIterator(G, weight="weight", minimum=False, init_partition=([], excluded)), k_best):
+        trees.append(_tree("base", parts, edges, list(A.edges)))
+    return trees
+
+
+def _greedy_tree(parts, edges) -> KinematicTree:
+    """Ablation: no graph.  Parts are placed least-moving first (by their best BIC against the
+    base); each attaches to the already placed part with the best (lowest) BIC."""
+    placed, arcs = ["base"], []
+    remaining = sorted((p for p in parts if p != "base"),
+                       key=lambda p: min(h.bic for h in edges[("base", p)].values()))
+    for p in remaining:
+        cands = [a for a in placed if (a, p) in edges]
+        a = min(cands, key=lambda a: min(h.bic for h in edges[(a, p)].values()))
+        arcs.append((a, p))
+        placed.append(p)
+    return _tree("base", parts, edges, arcs)
+
+
+def infer_tree(tracks: PoseTracks, method: str = "graph", k_best: int = 3) -> GraphResult:
+    """Tracks -> kinematic tree (see module doc).  ``method``: 'graph' (constraint graph +
+    arborescence, k_best alternatives) or 'greedy' (ablation, one tree).
+
+    Raises DataError when no track moves relative to the world (nothing to infer)."""
+    if method not in ("graph", "greedy"):
+        raise ValueError(f"method must be 'graph' or 'greedy', got {method!r}")
+    fits = _pair_fits(tracks)
+    parts = _merge(tracks, fits)
+    if len(parts) == 1:
+        sig = max(h["rigid"].noise_sigma for h in fits.values())
+        raise DataError(
+            f"no motion: every track ({', '.join(tracks.names)}) stays rigid with the world within "
+            f"the noise (σ ≈ {sig * 1e3:.3g} mm); there is no joint to infer"
+        )
+    edges = _part_edges(tracks, fits, parts)
+    if method == "greedy":
+        return GraphResult(_greedy_tree(parts, edges), (), edges, method)
+    trees = _graph_trees(parts, edges, k_best)
+    return GraphResult(trees[0], tuple(trees[1:]), edges, method)
