@@ -16,7 +16,7 @@ import pinocchio as pin
 import scipy.linalg
 import scipy.signal
 
-from ..errors import DataError, require_finite
+from ..errors import DataError
 from ..io.recording import Recording
 from ..model import ArticulatedModel
 from ..model.pinocchio import build_pin_model
@@ -133,9 +133,6 @@ def fit_idim_ls(
     trim_s: seconds dropped at each end (filter transients); v_min [rad/s]: rows of a joint whose
     |v| is below it are left out of the fit (friction there is neither sign(v) nor well filtered)."""
     rec = rec.select(model.joint_names)
-    for name in ("q", "v", "tau"):
-        if getattr(rec, name) is not None:
-            require_finite(name, getattr(rec, name), "IDIM-LS recording")
     pm = build_pin_model(model)
     q, v, a, tau = filtered_states(rec, cutoff_hz)
     keep = np.flatnonzero((rec.t >= rec.t[0] + trim_s) & (rec.t <= rec.t[-1] - trim_s))[::decimate]
