@@ -1,0 +1,125 @@
+"""Each graph stage alone on exact synthetic tracks, then the real Sturm logs."""
+
+import glob
+import json
+
+import numpy as np
+import pytest
+
+from kinemaforge_opt.cli import main
+from kinemaforge_opt.errors import DataError
+from kinemaforge_opt.graph import fit_all, infer_tree, relative_motion, score_pair
+from kinemaforge_opt.io.tracks import PoseTracks, read_sturm_log, write_tracks
+from kinemaforge_opt.spatial import axis_angle_error, line_distance, screw_motion, translation_motion
+
+STURM = "/work/shared/data/real/articulation/mechanisms_iros_2010"
+T = 30
+ANGLES = np.linspace(0.0, 1.2, T)
+AXIS = np.array([0.0, 0.1, 1.0]) / np.linalg.norm([0.0, 0.1, 1.0])
+POINT = np.array([0.5, 0.2, 0.0])
+
+
+def _pose(p):
+    X = np.eye(4)
+    X[:3, 3] = p
+    return X
+
+
+def _tracks(poses: dict, full=True) -> PoseTracks:
+    names = tuple(poses)
+    P = np.array([[X[:3, 3] for X in poses[n]] for n in names])
+    R = np.array([[X[:3, :3] for X in poses[n]] for n in names])
+    return PoseTracks(np.arange(T) * 0.1, names, P, R if full else None)
+
+
+def _door(offset=(0.9, 0.2, 0.5), pitch=0.0):
+    return [screw_motion(AXIS, POINT, a, pitch) @ _pose(offset) for a in ANGLES]
+
+
+def _best(hyps):
+    return max(hyps.values(), key=lambda h: h.confidence)
+
+
+@pytest.mark.parametrize("full", [True, False])
+def test_exact_revolute_axis(full):
+    h = score_pair(fit_all(relative_motion(_tracks({"door": _door()}, full), None, 0)))
+    best = _best(h)
+    assert best.type == "revolute"
+    assert axis_angle_error(best.axis_world, AXIS) < 1e-6
+    assert line_distance(best.axis_world, best.origin_world, AXIS, POINT) < 1e-6
+    np.testing.assert_allclose(np.abs(best.q[-1]), 1.2, atol=1e-6)
+
+
+def test_exact_helical_pitch():
+    best = _best(score_pair(fit_all(relative_motion(_tracks({"screw": _door(pitch=0.05)}), None, 0))))
+    assert best.type == "helical" and abs(best.pitch - 0.05) < 1e-6
+    assert axis_angle_error(best.axis_world, AXIS) < 1e-6
+
+
+@pytest.mark.parametrize("full", [True, False])
+def test_prismatic_pair_is_prismatic(full):
+    axis = np.array([1.0, 0.5, 0.0]) / np.linalg.norm([1.0, 0.5, 0.0])
+    poses = {"drawer": [translation_motion(axis, 0.3 * a) @ _pose((0, 1, 0.3)) for a in ANGLES]}
+    best = _best(score_pair(fit_all(relative_motion(_tracks(poses, full), None, 0))))
+    assert best.type == "prismatic" and axis_angle_error(best.axis_world, axis) < 1e-6
+
+
+def test_rigid_pair_gives_rigid_edge_and_merges():
+    door = _door()
+    tracks = _tracks({"door": door, "handle": [X @ _pose((0.1, 0, 0.3)) for X in door], "body": [np.eye(4)] * T})
+    hyps = score_pair(fit_all(relative_motion(tracks, 0, 1)))
+    assert _best(hyps).type == "rigid" and hyps["rigid"].confidence > 0.95
+    res = infer_tree(tracks)
+    assert res.best.parts == {"base": ("world", "body"), "door": ("door", "handle")}
+    (j,) = res.best.joints
+    assert (j.parent, j.child, j.type) == ("base", "door", "revolute")
+
+
+def test_tree_topology_and_kbest():
+    tracks = _tracks({
+        "door": _door(),
+        "drawer": [translation_motion([1, 0, 0], 0.3 * a) @ _pose((0, 1, 0.3)) for a in ANGLES],
+    })
+    res = infer_tree(tracks, k_best=3)
+    assert {(j.parent, j.child, j.type) for j in res.best.joints} == {
+        ("base", "door", "revolute"), ("base", "drawer", "prismatic")}
+    assert len(res.alternatives) == 2
+    assert all(t.log_score <= res.best.log_score for t in res.alternatives)
+    greedy = infer_tree(tracks, method="greedy")
+    assert greedy.method == "greedy" and len(greedy.best.joints) == 2
+
+
+def test_no_motion_is_refused(tmp_path):
+    rng = np.random.default_rng(0)
+    P = np.array([0.3, 0.1, 0.2]) + 1e-3 * rng.normal(size=(1, 50, 3))
+    tracks = PoseTracks(np.arange(50.0), ("still",), P)
+    with pytest.raises(DataError, match="no motion"):
+        infer_tree(tracks)
+    write_tracks(tmp_path / "tracks.csv", tracks)
+    assert main(["reconstruct", str(tmp_path / "tracks.csv"), "-o", str(tmp_path / "out")]) == 2
+
+
+def test_missing_input_exit_2(tmp_path, capsys):
+    assert main(["reconstruct", str(tmp_path / "none.csv"), "-o", str(tmp_path / "o")]) == 2
+    assert "none.csv" in capsys.readouterr().err
+
+
+EXPECTED = {"left_door": ("revolute", 0.32, 0.40), "right_door": ("revolute", 0.32, 0.40),
+            "dishwasher": ("revolute", 0.62, 0.70), "drawer": ("prismatic", None, None)}
+
+
+@pytest.mark.parametrize("kind", sorted(EXPECTED))
+def test_real_sturm_logs(kind):
+    want, r_lo, r_hi = EXPECTED[kind]
+    for log in sorted(glob.glob(f"{STURM}/{kind}/*.log")):
+        (j,) = infer_tree(read_sturm_log(log)).best.joints
+        assert j.type == want, log
+        if r_lo is not None:
+            assert r_lo < j.hypothesis.radius < r_hi, (log, j.hypothesis.radius)
+
+
+def test_reconstruct_command_writes_json(tmp_path):
+    out = tmp_path / "out"
+    assert main(["reconstruct", f"{STURM}/right_door/003.log", "-o", str(out)]) == 0
+    (j,) = json.loads((out / "reconstruction.json").read_text())["joints"]
+    assert j["type"] == "revolute" and 0.32 < j["radius"] < 0.40 and len(j["axis_world"]) == 3
