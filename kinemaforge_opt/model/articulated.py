@@ -130,9 +130,11 @@ class JointLimits:
 
 @dataclass(frozen=True)
 class JointDynamics:
-    """Joint-level dynamics acting on the joint coordinate q (rad or m).
+    """Joint-level dynamics acting on the joint coordinate q (rad or m), SI units.
 
-    Generalised joint force = -damping·v - coulomb·sign(v) - spring_stiffness·(q - spring_rest);
+    Passive generalised force (see :mod:`kinemaforge_opt.physics.effects` for each term):
+    -damping·v - coulomb·sign(v) - stribeck·exp(-(v/v_stribeck)²)·sign(v)
+    - spring_stiffness·(q - spring_rest) + bias - drag·v·|v|;
     armature adds to the joint-space inertia diagonal (kg·m² or kg).
     """
 
@@ -141,21 +143,37 @@ class JointDynamics:
     spring_stiffness: float = 0.0
     spring_rest: float = 0.0
     armature: float = 0.0
+    stribeck: float = 0.0
+    v_stribeck: float = 0.01
+    bias: float = 0.0
+    drag: float = 0.0
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
             if not np.isfinite(v):
                 raise ModelError(f"joint dynamics {f.name} must be finite, got {v}")
-            if f.name != "spring_rest" and v < 0:
+            if f.name not in ("spring_rest", "bias") and v < 0:
                 raise ModelError(f"joint dynamics {f.name} must be >= 0, got {v}")
+            object.__setattr__(self, f.name, float(v))
+        if self.v_stribeck <= 0:
+            raise ModelError(f"joint dynamics v_stribeck must be > 0, got {self.v_stribeck}")
 
-    def generalized_force(self, q, v):
-        """Passive joint force (works on numpy arrays or casadi symbols; sign uses tanh-free sign)."""
-        import casadi as ca
+    def passive_force(self, q, v):
+        """Generalised passive force at (q, v); numpy arrays or casadi symbols (smooth sign)."""
+        from ..physics.effects import EFFECTS
 
-        sign = ca.sign if isinstance(v, (ca.SX, ca.MX)) else np.sign
-        return -self.damping * v - self.coulomb * sign(v) - self.spring_stiffness * (q - self.spring_rest)
+        total = EFFECTS["viscous_damping"].force(q, v, self.damping)
+        total = total + EFFECTS["coulomb_friction"].force(q, v, self.coulomb)
+        if self.stribeck:
+            total = total + EFFECTS["stribeck_friction"].force(q, v, self.stribeck, self.v_stribeck)
+        if self.spring_stiffness:
+            total = total + EFFECTS["spring"].force(q, v, self.spring_stiffness, self.spring_rest)
+        if self.bias:
+            total = total + EFFECTS["constant_bias"].force(q, v, self.bias)
+        if self.drag:
+            total = total + EFFECTS["quadratic_drag"].force(q, v, self.drag)
+        return total
 
 
 @dataclass(frozen=True, eq=False)

@@ -34,6 +34,8 @@ from .articulated import (
 KF_NS = "https://kinemaforge.dev/urdf/1"
 ET.register_namespace("kinemaforge", KF_NS)
 _SUPPORTED = ("revolute", "continuous", "prismatic", "fixed")
+# JointDynamics fields that standard URDF cannot hold (damping and friction it can).
+_EXTENSION_DYNAMICS = ("spring_stiffness", "spring_rest", "armature", "stribeck", "v_stribeck", "bias", "drag")
 
 
 def read_urdf(path: str | os.PathLike) -> ArticulatedModel:
@@ -82,9 +84,7 @@ def parse_urdf(text: str, source: str = "<string>") -> ArticulatedModel:
         dynamics = JointDynamics(
             damping=_f(dyn.damping if dyn else None),
             coulomb=_f(dyn.friction if dyn else None),
-            spring_stiffness=_f(ext.get("spring_stiffness")),
-            spring_rest=_f(ext.get("spring_rest")),
-            armature=_f(ext.get("armature")),
+            **{k: _f(ext.get(k)) for k in _EXTENSION_DYNAMICS if k in ext},
         )
         limits = None
         if j.limit is not None and jtype != "fixed":
@@ -159,10 +159,10 @@ def urdf_string(model: ArticulatedModel) -> str:
             ext = {}
             if j.type == "helical":
                 ext.update(type="helical", pitch=repr(j.pitch))
-            if d.spring_stiffness or d.spring_rest:
-                ext.update(spring_stiffness=repr(d.spring_stiffness), spring_rest=repr(d.spring_rest))
-            if d.armature:
-                ext["armature"] = repr(d.armature)
+            default = JointDynamics()
+            ext.update(
+                {k: repr(getattr(d, k)) for k in _EXTENSION_DYNAMICS if getattr(d, k) != getattr(default, k)}
+            )
             if ext:
                 ET.SubElement(je, f"{{{KF_NS}}}joint", ext)
     ET.indent(robot)

@@ -1,0 +1,185 @@
+"""``calibrate``: fit chosen parameters of a model to a joint-space recording.
+
+The library entry point for calibration inside control code::
+
+    from kinemaforge_opt import calibrate, read_urdf
+    from kinemaforge_opt.io.recording import read_recording
+    cal = calibrate(read_urdf("door.urdf"), read_recording("rec.csv"),
+                    free=["hinge.axis", "hinge.damping", "hinge.coulomb"])
+    cal.success, cal.estimates["hinge.damping"].value, cal.model  # calibrated ArticulatedModel
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .io.recording import Recording
+from .model.articulated import ArticulatedModel, Inertial
+from .nlp.joint_space import JointSpaceFit, build_joint_space_fit
+from .nlp.parameters import FORCE_PARAMS
+from .nlp.sensitivity import fit_sensitivity
+
+_UNITS = {
+    "damping": ("N*m*s/rad", "N*s/m"), "coulomb": ("N*m", "N"), "stribeck": ("N*m", "N"),
+    "v_stribeck": ("rad/s", "m/s"), "spring_stiffness": ("N*m/rad", "N/m"), "spring_rest": ("rad", "m"),
+    "bias": ("N*m", "N"), "drag": ("N*m*s^2/rad^2", "N*s^2/m^2"), "limit_stop": ("rad", "m"),
+    "limit_stiffness": ("N*m/rad", "N/m"), "axis": ("1", "1"), "origin": ("m", "m"), "pitch": ("m/rad", "m/rad"),
+    "armature": ("kg*m^2", "kg"), "inertia": ("kg, kg*m, kg*m^2", "kg, kg*m, kg*m^2"), "gravity": ("m/s^2", "m/s^2"),
+}
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A fitted parameter block: value, nominal (prior) and 95 % interval, element-wise
+    (shape (size,)); for an axis, ``ci95_angle_rad`` is the 95 % bound of its direction error."""
+
+    name: str
+    value: np.ndarray
+    nominal: np.ndarray
+    ci95_low: np.ndarray
+    ci95_high: np.ndarray
+    unit: str
+    ci95_angle_rad: float | None = None
+
+    def to_dict(self) -> dict:
+        d = {
+            "name": self.name, "value": self.value.tolist(), "nominal": self.nominal.tolist(),
+            "ci95": [self.ci95_low.tolist(), self.ci95_high.tolist()], "unit": self.unit,
+        }
+        if self.ci95_angle_rad is not None:
+            d["ci95_angle_rad"] = self.ci95_angle_rad
+        return d
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The outcome of :func:`calibrate`.  ``success`` False means IPOPT did not converge
+    (``status`` says how); the estimates are then IPOPT's last iterate."""
+
+    success: bool
+    status: str
+    iterations: int
+    estimates: dict[str, Estimate]
+    model: ArticulatedModel
+    effects: dict[str, tuple[str, ...]]
+    identifiability: tuple[str, ...]
+    costs: dict[str, float]
+    violations: dict[str, float]
+    rms_q: dict[str, float]
+    q_fit: np.ndarray
+    v_fit: np.ndarray
+    recording: Recording
+    solve_time_s: float
+
+    def to_dict(self) -> dict:
+        return {
+            "success": self.success, "status": self.status, "iterations": self.iterations,
+            "estimates": {k: e.to_dict() for k, e in self.estimates.items()},
+            "effects": {k: list(v) for k, v in self.effects.items()},
+            "identifiability": list(self.identifiability), "costs": self.costs,
+            "violations": self.violations, "rms_q": self.rms_q, "solve_time_s": self.solve_time_s,
+        }
+
+
+def apply_parameters(model: ArticulatedModel, values: dict[str, np.ndarray]) -> ArticulatedModel:
+    """A copy of ``model`` with the named parameter blocks set to ``values`` (physical units)."""
+    out = model
+    for name, value in values.items():
+        value = np.asarray(value, dtype=float)
+        owner, field = name.rsplit(".", 1) if "." in name else ("", name)
+        if field == "gravity" or name == "gravity":
+            out = dataclasses.replace(out, gravity=value)
+        elif field in FORCE_PARAMS:
+            if field in ("limit_stop", "limit_stiffness"):
+                continue  # limit contact has no JointDynamics field; reported, not persisted
+            j = out.joint(owner)
+            out = out.with_joint(owner, dynamics=dataclasses.replace(j.dynamics, **{field: float(value[0])}))
+        elif field == "axis":
+            out = out.with_joint(owner, axis=value / np.linalg.norm(value))
+        elif field == "origin":
+            T = out.joint(owner).T_parent_joint.copy()
+            T[:3, 3] = value
+            out = out.with_joint(owner, T_parent_joint=T)
+        elif field == "pitch":
+            out = out.with_joint(owner, pitch=float(value[0]))
+        elif field == "armature":
+            j = out.joint(owner)
+            out = out.with_joint(owner, dynamics=dataclasses.replace(j.dynamics, armature=float(value[0])))
+        elif field == "inertia":
+            out = out.with_link(owner, inertial=Inertial.from_dynamic_parameters(value))
+    return out
+
+
+def calibrate(
+    model: ArticulatedModel,
+    recording: Recording,
+    free: tuple[str, ...] | list[str] | None = None,
+    effects: dict[str, tuple[str, ...]] | None = None,
+    energy: str = "soft",
+    energy_weight: float = 1.0,
+    max_iter: int = 300,
+    print_level: int = 0,
+) -> Calibration:
+    """Fit ``free`` parameters of ``model`` to ``recording`` (joint-space NLP, IPOPT).
+
+    free: parameter names (``kinemaforge_opt.nlp.parameters``); default: viscous damping and
+    Coulomb friction of every movable joint.  effects: extra force effects per joint.
+    energy: "soft" | "hard" | "off" (see :mod:`kinemaforge_opt.nlp.joint_space`).
+    Raises for bad input (unknown names, missing joints, no motion) before any work starts.
+    """
+    if free is None:
+        free = [f"{j}.{p}" for j in model.joint_names for p in ("damping", "coulomb")]
+    start = time.perf_counter()
+    fit = build_joint_space_fit(model, recording, tuple(free), effects, energy=energy, energy_weight=energy_weight)
+    res = fit.problem.solve(max_iter=max_iter, print_level=print_level)
+    X = res.values["x"]
+    z = np.concatenate([np.atleast_1d(res.values[f"p:{b.name}"]) for b in fit.blocks]) if fit.blocks else np.zeros(0)
+    return _result(fit, res, X, z, time.perf_counter() - start)
+
+
+def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: float) -> Calibration:
+    model, rec = fit.model, fit.recording
+    n = model.nq
+    words: list[str] = []
+    sens = fit_sensitivity(fit, X, z) if z.size else None
+    estimates, values, offset = {}, {}, 0
+    for b in fit.blocks:
+        zb = z[offset : offset + b.size]
+        value = zb * b.scale
+        if b.name.endswith(".axis"):
+            value = value / np.linalg.norm(value)
+        sd = np.sqrt(np.maximum(np.diag(sens.cov_z)[offset : offset + b.size], 0.0)) * b.scale if sens else np.zeros(b.size)
+        angle = None
+        if b.name.endswith(".axis") and sens is not None:
+            C = sens.cov_z[offset : offset + 3, offset : offset + 3]
+            angle = float(1.96 * np.sqrt(max(np.linalg.eigvalsh(C).max(), 0.0)))
+        field = b.name.rsplit(".", 1)[-1]
+        joint_or_link = b.name.rsplit(".", 1)[0]
+        linear = joint_or_link in model.joint_names and model.joint(joint_or_link).type == "prismatic"
+        unit = _UNITS.get(field, ("", ""))[1 if linear else 0]
+        estimates[b.name] = Estimate(b.name, value, b.nominal, value - 1.96 * sd, value + 1.96 * sd, unit, angle)
+        values[b.name] = value
+        offset += b.size
+    if sens is not None:
+        for combo in sens.unidentifiable:
+            names = ", ".join(f"{k} ({w:+.2f})" for k, w in combo.items())
+            words.append(
+                f"this recording cannot determine the combination {names}: only directions orthogonal to it "
+                "are fitted (e.g. without applied forces, friction and damping are known only relative to inertia)"
+            )
+        for name, e in estimates.items():
+            half = (e.ci95_high - e.ci95_low) / 2
+            rel = half / np.maximum(np.abs(e.value), 1e-12)
+            if e.value.size == 1 and rel[0] > 1.0 and not name.endswith(".axis"):
+                words.append(f"{name} is poorly determined: {e.value[0]:.4g} ± {half[0]:.2g} {e.unit}")
+    rms = np.sqrt(np.mean((X[:n, :].T - rec.q) ** 2, axis=0))
+    return Calibration(
+        success=res.success, status=res.status, iterations=res.iterations, estimates=estimates,
+        model=apply_parameters(model, values), effects=fit.effects, identifiability=tuple(words),
+        costs=res.costs, violations=res.violations, rms_q=dict(zip(model.joint_names, map(float, rms))),
+        q_fit=X[:n, :].T.copy(), v_fit=X[n:, :].T.copy(), recording=rec, solve_time_s=elapsed,
+    )

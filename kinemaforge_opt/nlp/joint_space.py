@@ -1,0 +1,319 @@
+"""The joint-space fit: a recording's trajectory and the model's free parameters, by direct
+collocation on the bridge's ABA.
+
+Transcription: one collocation interval per recorded sample interval, compressed
+Hermite–Simpson (4th order, A-stable, so stiff smooth-friction terms do not destabilise it):
+
+    x_m = (x_k + x_k+1)/2 + h/8 (f_k - f_k+1),     x_k+1 - x_k = h/6 (f_k + 4 f_m + f_k+1),
+
+with x = (q, v), f(x, u) = (v, ABA(q, v, u + tau_passive(q, v), theta)), and the applied force u
+interpolated linearly between samples.  Named terms:
+
+- cost ``output_q`` (and ``output_v`` when v is recorded): squared residuals / noise variance,
+  averaged over samples;
+- constraint ``dynamics``: the Hermite–Simpson defects;
+- ``energy`` (``soft`` cost or ``hard`` constraint, or ``off``): per window, the change of
+  rigid-body energy minus the work of applied and passive forces (Simpson quadrature on the same
+  collocation points), relative to the energy scale of the recording;
+- constraint ``unit_axis:<joint>`` for every freed axis.
+
+The interval functions are ``casadi.Function.map``-ped over the intervals, so the NLP graph stays
+small and JIT compilation is an option (FACTS.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..errors import DataError, KinemaforgeError, UnknownNameError
+from ..io.recording import Recording
+from ..model.articulated import ArticulatedModel
+from ..model.pinocchio import build_pin_model
+from ..physics.effects import EFFECTS
+from ..symbolic import Dynamics, available_parameters, build_dynamics
+from .parameters import (
+    FORCE_PARAMS,
+    DataScales,
+    ParameterBlock,
+    force_parameter_names,
+    make_block,
+    nominal_force_parameters,
+)
+from .problem import Problem
+
+# Which force-parameter groups make up each force effect.
+_EFFECT_PARAMS = {
+    "viscous_damping": ("damping",),
+    "coulomb_friction": ("coulomb",),
+    "stribeck_friction": ("stribeck", "v_stribeck"),
+    "spring": ("spring_stiffness", "spring_rest"),
+    "constant_bias": ("bias",),
+    "quadratic_drag": ("drag",),
+    "limit_contact": ("limit_stop", "limit_stiffness"),
+}
+
+
+def noise_std(x: np.ndarray) -> np.ndarray:
+    """Per-column noise level of a sampled signal (T, n) from its third differences (robust MAD;
+    white noise of std s gives third differences of std s·sqrt(20)).  Floored at 1e-9."""
+    d3 = np.diff(np.asarray(x, dtype=float), n=3, axis=0)
+    mad = np.median(np.abs(d3 - np.median(d3, axis=0)), axis=0)
+    return np.maximum(1.4826 * mad / np.sqrt(20.0), 1e-9)
+
+
+def velocity_estimate(rec: Recording) -> np.ndarray:
+    """Recorded v, or central differences of q (T, n)."""
+    return rec.v if rec.v is not None else np.gradient(rec.q, rec.t, axis=0)
+
+
+def data_scales(model: ArticulatedModel, rec: Recording) -> DataScales:
+    """Typical joint-space magnitudes of ``rec`` under ``model`` (for parameter scaling)."""
+    import pinocchio as pin
+
+    pm = build_pin_model(model)
+    pd = pm.createData()
+    v = velocity_estimate(rec)
+    a = np.gradient(v, rec.t, axis=0)
+    tau_id = np.array([pin.rnea(pm, pd, q, vv, aa) for q, vv, aa in zip(rec.q, v, a)])
+    inertia = np.diag(pin.crba(pm, pd, np.mean(rec.q, axis=0))).copy()
+    force = np.sqrt(np.mean(tau_id**2, axis=0))
+    if rec.tau is not None:
+        force = np.maximum(force, np.sqrt(np.mean(rec.tau**2, axis=0)))
+    return DataScales(
+        q=np.maximum(np.std(rec.q, axis=0), 1e-3),
+        v=np.maximum(np.sqrt(np.mean(v**2, axis=0)), 1e-3),
+        force=np.maximum(force, 1e-9),
+        inertia=np.maximum(inertia, 1e-12),
+    )
+
+
+@dataclass(frozen=True)
+class JointSpaceFit:
+    """A built (not yet solved) fit: the Problem plus what is needed to read its solution."""
+
+    problem: Problem
+    model: ArticulatedModel
+    recording: Recording
+    blocks: tuple[ParameterBlock, ...]
+    effects: dict[str, tuple[str, ...]]
+    dynamics: Dynamics
+    sigma_q: np.ndarray
+    sigma_v: np.ndarray | None
+    defect: ca.Function  # (xk, xk1, uk, uk1, h, theta, phi) -> (defect, work, dE)
+    theta_names: tuple[str, ...]
+    phi_layout: tuple[tuple[str, str], ...]  # (joint, force param) per entry of phi
+    phi_fixed: np.ndarray  # values of phi entries that are not free
+    phi_free: dict[int, tuple[str, int]]  # phi index -> (block name, index in block)
+    defects: ca.Function  # (x (2n, T), z) -> stacked defects; z = scaled free parameters
+    residuals: ca.Function  # (x (2n, T)) -> output residuals divided by the noise levels
+
+
+def active_effects(model: ArticulatedModel, extra: dict[str, tuple[str, ...]] | None = None) -> dict[str, tuple[str, ...]]:
+    """Force effects acting on each movable joint: those with non-zero parameters in the model's
+    JointDynamics, plus ``extra`` ({joint: (effect type, …)})."""
+    out = {}
+    for j in model.movable_joints:
+        d = j.dynamics
+        types = []
+        if d.damping:
+            types.append("viscous_damping")
+        if d.coulomb:
+            types.append("coulomb_friction")
+        if d.stribeck:
+            types.append("stribeck_friction")
+        if d.spring_stiffness:
+            types.append("spring")
+        if d.bias:
+            types.append("constant_bias")
+        if d.drag:
+            types.append("quadratic_drag")
+        out[j.name] = tuple(types)
+    for joint, types in (extra or {}).items():
+        if joint not in out:
+            raise UnknownNameError("movable joint", joint, out)
+        for t in types:
+            if t not in _EFFECT_PARAMS:
+                raise UnknownNameError(f"force effect (joint {joint!r})", t, _EFFECT_PARAMS)
+        out[joint] = tuple(dict.fromkeys(out[joint] + tuple(types)))
+    return out
+
+
+def build_joint_space_fit(
+    model: ArticulatedModel,
+    recording: Recording,
+    free: tuple[str, ...] | list[str],
+    effects: dict[str, tuple[str, ...]] | None = None,
+    energy: str = "soft",
+    energy_weight: float = 1.0,
+    energy_window_s: float = 1.0,
+    energy_tolerance: float = 1e-3,
+    sigma_q: np.ndarray | None = None,
+) -> JointSpaceFit:
+    """Build the fit of ``free`` parameters to ``recording`` (see the module docstring).
+
+    recording: must hold q for every movable joint of ``model`` (extra joints are an error).
+    free: parameter names (bridge names and ``<joint>.<force param>``; see ``nlp.parameters``).
+    effects: force effects to add per joint beyond those in the model ({joint: (type, …)}); their
+    parameters must be listed in ``free`` to be fitted, else they stay at the model's values.
+    energy: "soft" (penalty with ``energy_weight``), "hard" (|residual| <= ``energy_tolerance`` ×
+    energy scale) or "off".
+    """
+    if energy not in ("soft", "hard", "off"):
+        raise KinemaforgeError(f"energy must be 'soft', 'hard' or 'off', got {energy!r}")
+    missing = [j for j in model.joint_names if j not in recording.joint_names]
+    if missing:
+        raise DataError(f"recording has no q column for joint(s) {missing} of model {model.name!r}")
+    extra = [j for j in recording.joint_names if j not in model.joint_names]
+    if extra:
+        raise UnknownNameError("joint (recorded)", extra[0], model.joint_names)
+    rec = recording.select(model.joint_names)
+    if np.all(np.ptp(rec.q, axis=0) < 1e-9):
+        raise DataError("recording shows no motion: every joint stays at its initial position")
+
+    bridge_names = set(available_parameters(model))
+    valid = bridge_names | set(force_parameter_names(model))
+    for name in free:
+        if name not in valid:
+            raise UnknownNameError("free parameter", name, valid)
+    effects = active_effects(model, effects)
+    for name in free:  # freeing a force parameter activates its effect
+        joint, field = name.rsplit(".", 1)
+        if field in FORCE_PARAMS:
+            eff = next(e for e, ps in _EFFECT_PARAMS.items() if field in ps)
+            if eff not in effects[joint]:
+                effects[joint] = effects[joint] + (eff,)
+
+    theta_names = tuple(n for n in free if n in bridge_names)
+    dyn = build_dynamics(model, free=theta_names)
+    scales = data_scales(model, rec)
+    n = model.nq
+
+    # phi: every force parameter of every active effect, in a fixed layout.
+    phi_layout, phi_fixed = [], []
+    for j in model.joint_names:
+        nominal = nominal_force_parameters(model, j)
+        for eff in effects[j]:
+            for p in _EFFECT_PARAMS[eff]:
+                phi_layout.append((j, p))
+                phi_fixed.append(nominal[p])
+    phi_fixed = np.asarray(phi_fixed, dtype=float)
+
+    blocks = []
+    for name in free:
+        if name in bridge_names:
+            nominal = dyn.parameter(name).nominal
+        else:
+            joint, field = name.rsplit(".", 1)
+            nominal = np.array([nominal_force_parameters(model, joint)[field]])
+        blocks.append(make_block(model, name, nominal, scales))
+    blocks = tuple(blocks)
+
+    # --- symbolic interval function (SX) ---------------------------------------------------
+    theta = ca.SX.sym("theta", dyn.theta0.size)
+    phi = ca.SX.sym("phi", len(phi_layout))
+
+    def passive(q, v):
+        tau = [ca.SX(0)] * n
+        k = 0
+        for ji, j in enumerate(model.joint_names):
+            for eff in effects[j]:
+                ps = _EFFECT_PARAMS[eff]
+                args = [phi[k + i] for i in range(len(ps))]
+                tau[ji] = tau[ji] + EFFECTS[eff].force(q[ji], v[ji], *args)
+                k += len(ps)
+        return ca.vertcat(*tau)
+
+    def rhs(x, u):
+        q, v = x[:n], x[n:]
+        return ca.vertcat(v, dyn.aba(q, v, u + passive(q, v), theta)), ca.dot(u + passive(q, v), v)
+
+    def energy_of(x):
+        q, v = x[:n], x[n:]
+        return 0.5 * ca.dot(v, ca.mtimes(dyn.crba(q, theta), v)) + dyn.potential_energy(q, theta)
+
+    xk, xk1 = ca.SX.sym("xk", 2 * n), ca.SX.sym("xk1", 2 * n)
+    uk, uk1, h = ca.SX.sym("uk", n), ca.SX.sym("uk1", n), ca.SX.sym("h")
+    fk, pk = rhs(xk, uk)
+    fk1, pk1 = rhs(xk1, uk1)
+    xm = (xk + xk1) / 2 + h / 8 * (fk - fk1)
+    fm, pm_ = rhs(xm, (uk + uk1) / 2)
+    defect = xk1 - xk - h / 6 * (fk + 4 * fm + fk1)
+    work = h / 6 * (pk + 4 * pm_ + pk1)
+    d_energy = energy_of(xk1) - energy_of(xk)
+    interval = ca.Function(
+        "hermite_simpson", [xk, xk1, uk, uk1, h, theta, phi], [defect, work, d_energy],
+        ["xk", "xk1", "uk", "uk1", "h", "theta", "phi"], ["defect", "work", "dE"],
+    )
+
+    # --- the NLP ---------------------------------------------------------------------------
+    T = rec.t.size
+    prob = Problem(f"calibrate_{model.name}")
+    v0 = velocity_estimate(rec)
+    X = prob.variable("x", (2 * n, T), init=np.vstack([rec.q.T, v0.T]))
+    z = {}
+    for b in blocks:
+        z[b.name] = prob.variable(f"p:{b.name}", b.size, lower=b.lower / b.scale, upper=b.upper / b.scale, init=b.nominal / b.scale)
+    theta_mx = ca.vertcat(*[z[b.name] * b.scale for b in blocks if b.name in theta_names]) if theta_names else ca.MX(0, 1)
+    phi_free = {}
+    phi_entries = []
+    for i, (j, p) in enumerate(phi_layout):
+        name = f"{j}.{p}"
+        b = next((b for b in blocks if b.name == name), None)
+        if b is None:
+            phi_entries.append(ca.MX(phi_fixed[i]))
+        else:
+            phi_entries.append(z[name][0] * b.scale[0])
+            phi_free[i] = (name, 0)
+    phi_mx = ca.vertcat(*phi_entries) if phi_entries else ca.MX(0, 1)
+
+    U = rec.tau.T if rec.tau is not None else np.zeros((n, T))
+    H = np.diff(rec.t)[None, :]
+    mapped = interval.map(T - 1)
+    D, Wk, dE = mapped(X[:, :-1], X[:, 1:], U[:, :-1], U[:, 1:], H, theta_mx, phi_mx)
+    prob.add_constraint("dynamics", D)
+
+    sq = noise_std(rec.q) if sigma_q is None else np.broadcast_to(np.asarray(sigma_q, float), (n,))
+    Rq = (X[:n, :] - rec.q.T) / sq[:, None]
+    prob.add_cost("output_q", ca.sumsqr(Rq) / T)
+    sv = None
+    if rec.v is not None:
+        sv = noise_std(rec.v)
+        prob.add_cost("output_v", ca.sumsqr((X[n:, :] - rec.v.T) / sv[:, None]) / T)
+
+    if energy != "off":
+        per = max(1, int(round(energy_window_s / rec.dt)))
+        edges = list(range(0, T - 1, per)) + [T - 1]
+        resid = ca.vertcat(*[ca.sum2(dE[:, a:b]) - ca.sum2(Wk[:, a:b]) for a, b in zip(edges[:-1], edges[1:])])
+        e_scale = _energy_scale(model, rec, v0)
+        if energy == "soft":
+            prob.add_cost("energy", ca.sumsqr(resid / e_scale) / len(edges), weight=energy_weight)
+        else:
+            prob.add_constraint("energy", resid / e_scale, -energy_tolerance, energy_tolerance)
+
+    for b in blocks:
+        if b.name.endswith(".axis"):
+            prob.add_constraint(f"unit_axis:{b.name[:-5]}", ca.sumsqr(z[b.name]) - 1.0)
+
+    z_all = ca.vertcat(*[z[b.name] for b in blocks]) if blocks else ca.MX.sym("z", 0)
+    outputs = [ca.vec(Rq)] + ([ca.vec((X[n:, :] - rec.v.T) / sv[:, None])] if sv is not None else [])
+
+    return JointSpaceFit(
+        problem=prob, model=model, recording=rec, blocks=blocks, effects=effects, dynamics=dyn,
+        sigma_q=sq, sigma_v=sv, defect=interval, theta_names=theta_names, phi_layout=tuple(phi_layout),
+        phi_fixed=phi_fixed, phi_free=phi_free,
+        defects=ca.Function("defects", [X, z_all], [ca.vec(D)]),
+        residuals=ca.Function("residuals", [X], [ca.vertcat(*outputs)]),
+    )
+
+
+def _energy_scale(model: ArticulatedModel, rec: Recording, v: np.ndarray) -> float:
+    """Typical mechanical energy variation of the recording [J]: kinetic + potential spread."""
+    import pinocchio as pin
+
+    pm = build_pin_model(model)
+    pd = pm.createData()
+    E = np.array([pin.computeKineticEnergy(pm, pd, q, vv) + pin.computePotentialEnergy(pm, pd, q) for q, vv in zip(rec.q, v)])
+    return float(max(np.ptp(E), 1e-12))

@@ -1,0 +1,113 @@
+"""Uncertainty and identifiability of a solved joint-space fit.
+
+The collocation defects D(X, z) = 0 define the trajectory X as a function of the initial state
+x0 and the scaled parameters z.  By the implicit-function theorem,
+dX_rest/ds = -(dD/dX_rest)^-1 dD/ds with s = (x0, z); the output residuals r(X) then give the
+Gauss–Newton information F = Jᵀ J (J = dr/ds) and the covariance s² F⁻¹, s² = RSS / (N - dof).
+Unit-axis parameters are reduced to their two tangent directions first (the length of an axis
+vector is not a parameter).  Directions of F with eigenvalue below ``rel_tol`` × the largest
+(after normalising each coordinate) are reported as combinations the data cannot determine.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .joint_space import JointSpaceFit
+
+
+@dataclass(frozen=True)
+class Sensitivity:
+    """cov_z: covariance of the scaled parameters z (in the full z coordinates; axis blocks
+    carry their tangent-plane covariance).  unidentifiable: list of {coordinate label: weight}
+    combinations the data cannot determine.  dof: residuals minus parameters."""
+
+    cov_z: np.ndarray
+    labels: tuple[str, ...]
+    unidentifiable: tuple[dict[str, float], ...]
+    residual_variance: float
+    dof: int
+
+
+def _tangent_basis(a: np.ndarray) -> np.ndarray:
+    a = a / np.linalg.norm(a)
+    helper = np.eye(3)[np.argmin(np.abs(a))]
+    u = np.cross(a, helper)
+    u /= np.linalg.norm(u)
+    return np.stack([u, np.cross(a, u)], axis=1)  # (3, 2)
+
+
+def fit_sensitivity(fit: JointSpaceFit, X: np.ndarray, z: np.ndarray, rel_tol: float = 1e-9) -> Sensitivity:
+    """Covariance and unidentifiable directions at the solution (X (2n, T), z (nz,))."""
+    import casadi as ca
+
+    nx, T = X.shape
+    Xs = ca.MX.sym("X", nx, T)
+    zs = ca.MX.sym("z", z.size)
+    D = fit.defects(Xs, zs)
+    jac = ca.Function("defect_jacobians", [Xs, zs], [ca.jacobian(D, Xs), ca.jacobian(D, zs)])
+    JX, Jz = jac(X, z)
+    JX = sp.csc_matrix(JX.sparse()) if hasattr(JX, "sparse") else sp.csc_matrix(np.asarray(JX))
+    Jz = np.asarray(Jz.full()) if hasattr(Jz, "full") else np.asarray(Jz)
+    r = np.asarray(fit.residuals(X).full()).ravel()
+    Rj = ca.Function("residual_jacobian", [Xs], [ca.jacobian(fit.residuals(Xs), Xs)])(X)
+    Rj = sp.csr_matrix(Rj.sparse())
+
+    # s = (x0, z); X_rest follows from the defects.
+    A = JX[:, nx:]
+    B = sp.hstack([JX[:, :nx], sp.csc_matrix(Jz)]).toarray()
+    dXrest = -spla.splu(A.tocsc()).solve(B)
+    dX = np.vstack([np.hstack([np.eye(nx), np.zeros((nx, z.size))]), dXrest])  # (nx T, nx + nz)
+    J = Rj @ dX
+
+    # Reduce axis blocks to their tangent plane.
+    cols, labels, pieces = [], [], []
+    nrow = nx + z.size
+    P = []
+    for i in range(nx):
+        e = np.zeros(nrow)
+        e[i] = 1
+        P.append(e)
+        labels.append(f"initial state[{i}]")
+    offset = nx
+    for b in fit.blocks:
+        if b.name.endswith(".axis"):
+            Bt = _tangent_basis(z[offset - nx : offset - nx + 3])
+            for k in range(2):
+                e = np.zeros(nrow)
+                e[offset : offset + 3] = Bt[:, k]
+                P.append(e)
+                labels.append(f"{b.name}[tilt {k}]")
+        else:
+            for k in range(b.size):
+                e = np.zeros(nrow)
+                e[offset + k] = 1
+                P.append(e)
+                labels.append(b.name if b.size == 1 else f"{b.name}[{k}]")
+        offset += b.size
+    P = np.stack(P, axis=1)  # (nx + nz, reduced)
+    Jr = J @ P
+    F = Jr.T @ Jr
+    dof = max(r.size - F.shape[0], 1)
+    s2 = float(r @ r) / dof
+
+    d = np.sqrt(np.maximum(np.diag(F), 1e-300))
+    Fn = F / np.outer(d, d)
+    w, V = np.linalg.eigh(Fn)
+    keep = w > rel_tol * w.max()
+    Fn_inv = (V[:, keep] / w[keep]) @ V[:, keep].T
+    cov_r = s2 * Fn_inv / np.outer(d, d)
+    unidentifiable = []
+    for k in np.where(~keep)[0]:
+        vec = V[:, k]
+        combo = {labels[i]: float(vec[i]) for i in np.argsort(-np.abs(vec)) if abs(vec[i]) > 0.2 and i >= nx}
+        if combo:
+            unidentifiable.append(combo)
+    # Back to full z coordinates (axis blocks: tangent covariance mapped into 3-D).
+    Pz = P[nx:, nx:] if P.shape[1] > nx else np.zeros((z.size, 0))
+    cov_z = Pz @ cov_r[nx:, nx:] @ Pz.T
+    return Sensitivity(cov_z, tuple(labels), tuple(unidentifiable), s2, dof)

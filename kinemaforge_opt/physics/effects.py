@@ -1,0 +1,100 @@
+"""The effect library: joint-level physics a nominal model may leave out.
+
+Each effect is a generalised force on one joint coordinate, ``force(q, v, p)`` with q [rad or m],
+v [rad/s or m/s] and its parameters ``p``, written so it accepts numpy arrays and casadi
+symbols alike.  Names and the meaning of ``value`` follow DESIGN.md's effect table.
+Effects that change the rigid-body model itself (``axis_tilt``, ``inertia_error``) carry no
+force: the calibration frees the matching bridge parameters instead (see ``model_parameters``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import casadi as ca
+import numpy as np
+
+# Smooth sign used inside the NLP: tanh(v / V_SMOOTH).  1 mm/s or 1 mrad/s: far below the
+# speeds at which friction matters for identification, yet smooth for IPOPT's Newton steps.
+V_SMOOTH = 1e-3
+
+
+def _is_symbolic(x) -> bool:
+    return isinstance(x, (ca.SX, ca.MX, ca.DM))
+
+
+def smooth_sign(v, eps: float = V_SMOOTH):
+    """tanh(v / eps): a differentiable sign(v)."""
+    return ca.tanh(v / eps) if _is_symbolic(v) else np.tanh(np.asarray(v) / eps)
+
+
+def _exp(x):
+    return ca.exp(x) if _is_symbolic(x) else np.exp(x)
+
+
+def _abs(x):
+    return ca.fabs(x) if _is_symbolic(x) else np.abs(x)
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A named, parameterised joint effect.
+
+    type: the DESIGN.md name.  params: parameter names; ``params[0]`` is the reported ``value``.
+    units: (rotary unit, linear unit) of the value.  lower: lower bounds per parameter (physical
+    sign constraints).  force: generalised force (q, v, *params) -> force.  conservative: True if
+    the force derives from a potential (its work is not dissipated).
+    model_parameters: bridge parameters freed instead of a force (axis tilt, inertia error).
+    """
+
+    type: str
+    params: tuple[str, ...]
+    units: tuple[str, str]
+    lower: tuple[float, ...]
+    force: Callable | None
+    conservative: bool = False
+    model_parameters: tuple[str, ...] = ()
+
+
+def _stribeck(q, v, excess, v_s):
+    # Excess static friction decaying with speed: -(f_s - f_c) exp(-(v/v_s)^2) sign(v).
+    return -excess * _exp(-((v / v_s) ** 2)) * smooth_sign(v)
+
+
+def _limit_contact(q, v, stop, k):
+    # One-sided penalty spring beyond the stop, with the stop on the side the joint approaches:
+    # a smooth ramp softplus(s (q - stop)) / s approximates max(q - stop, 0).
+    s = 2000.0
+    x = s * (q - stop)
+    ramp = (ca.log1p(ca.exp(x)) if _is_symbolic(x) else np.logaddexp(0.0, x)) / s
+    return -k * ramp
+
+
+EFFECTS: dict[str, Effect] = {
+    e.type: e
+    for e in (
+        Effect("viscous_damping", ("damping",), ("N*m*s/rad", "N*s/m"), (0.0,), lambda q, v, b: -b * v),
+        Effect(
+            "coulomb_friction", ("coulomb",), ("N*m", "N"), (0.0,), lambda q, v, f: -f * smooth_sign(v)
+        ),
+        Effect(
+            "stribeck_friction", ("stribeck", "v_stribeck"), ("N*m", "N"), (0.0, 1e-3), _stribeck
+        ),
+        Effect(
+            "spring",
+            ("spring_stiffness", "spring_rest"),
+            ("N*m/rad", "N/m"),
+            (0.0, -np.inf),
+            lambda q, v, k, rest: -k * (q - rest),
+            conservative=True,
+        ),
+        Effect("constant_bias", ("bias",), ("N*m", "N"), (-np.inf,), lambda q, v, c: c + 0 * v),
+        Effect("quadratic_drag", ("drag",), ("N*m*s^2/rad^2", "N*s^2/m^2"), (0.0,), lambda q, v, d: -d * v * _abs(v)),
+        Effect("limit_contact", ("limit_stop", "limit_stiffness"), ("rad", "m"), (-np.inf, 0.0), _limit_contact),
+        Effect("axis_tilt", ("axis",), ("rad", "rad"), (), None, model_parameters=("axis",)),
+        Effect("inertia_error", ("inertia_ratio",), ("1", "1"), (), None, model_parameters=("inertia",)),
+    )
+}
+
+FORCE_EFFECTS = tuple(t for t, e in EFFECTS.items() if e.force is not None)
