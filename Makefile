@@ -5,9 +5,9 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.kinemaforge-installed
-# Debian packages the project needs at run time (open3d: libGL/EGL/X11; OpenMP: libgomp;
+# Debian packages the project needs at run time (open3d: libGL/EGL/X11 and libusb; OpenMP: libgomp;
 # MuJoCo headless rendering: EGL) and at build time (the native bridge: g++).
-SYSTEM_PACKAGES := g++ libgl1 libegl1 libgomp1 libx11-6
+SYSTEM_PACKAGES := g++ libgl1 libegl1 libgomp1 libx11-6 libusb-1.0-0
 NATIVE_SOURCES := $(wildcard kinemaforge_opt/native/*.cpp kinemaforge_opt/native/*.hpp)
 
 .PHONY: demo test test-all bench sysdeps clean

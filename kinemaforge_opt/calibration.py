@@ -123,6 +123,8 @@ def calibrate(
     energy_weight: float = 1.0,
     max_iter: int = 300,
     print_level: int = 0,
+    substeps: int = 1,
+    friction_eps: float | None = None,
 ) -> Calibration:
     """Fit ``free`` parameters of ``model`` to ``recording`` (joint-space NLP, IPOPT).
 
@@ -134,7 +136,10 @@ def calibrate(
     if free is None:
         free = [f"{j}.{p}" for j in model.joint_names for p in ("damping", "coulomb")]
     start = time.perf_counter()
-    fit = build_joint_space_fit(model, recording, tuple(free), effects, energy=energy, energy_weight=energy_weight)
+    fit = build_joint_space_fit(
+        model, recording, tuple(free), effects, energy=energy, energy_weight=energy_weight,
+        substeps=substeps, friction_eps=friction_eps,
+    )
     res = fit.problem.solve(max_iter=max_iter, print_level=print_level)
     X = res.values["x"]
     z = np.concatenate([np.atleast_1d(res.values[f"p:{b.name}"]) for b in fit.blocks]) if fit.blocks else np.zeros(0)
@@ -149,7 +154,7 @@ def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: floa
     estimates, values, offset = {}, {}, 0
     for b in fit.blocks:
         zb = z[offset : offset + b.size]
-        value = zb * b.scale
+        value = np.clip(zb * b.scale, b.lower, b.upper)  # IPOPT may overstep bounds by ~1e-8
         if b.name.endswith(".axis"):
             value = value / np.linalg.norm(value)
         sd = np.sqrt(np.maximum(np.diag(sens.cov_z)[offset : offset + b.size], 0.0)) * b.scale if sens else np.zeros(b.size)
@@ -176,6 +181,7 @@ def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: floa
             rel = half / np.maximum(np.abs(e.value), 1e-12)
             if e.value.size == 1 and rel[0] > 1.0 and not name.endswith(".axis"):
                 words.append(f"{name} is poorly determined: {e.value[0]:.4g} ± {half[0]:.2g} {e.unit}")
+    X = X[:, :: fit.substeps]
     rms = np.sqrt(np.mean((X[:n, :].T - rec.q) ** 2, axis=0))
     return Calibration(
         success=res.success, status=res.status, iterations=res.iterations, estimates=estimates,

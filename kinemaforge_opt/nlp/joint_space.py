@@ -64,6 +64,15 @@ def noise_std(x: np.ndarray) -> np.ndarray:
     return np.maximum(1.4826 * mad / np.sqrt(20.0), 1e-9)
 
 
+def friction_smoothing(rec: Recording) -> np.ndarray:
+    """Per-joint width eps of the smooth sign tanh(v/eps) [rad/s or m/s]: 3 % of the joint's RMS
+    speed in the recording.  Relative to the motion, so the friction law is sharp at the speeds
+    that carry information whatever the object's size, yet smooth enough for collocation at the
+    sampling rate (floored at 1e-4)."""
+    v = velocity_estimate(rec)
+    return np.maximum(0.03 * np.sqrt(np.mean(v**2, axis=0)), 1e-4)
+
+
 def velocity_estimate(rec: Recording) -> np.ndarray:
     """Recorded v, or central differences of q (T, n)."""
     return rec.v if rec.v is not None else np.gradient(rec.q, rec.t, axis=0)
@@ -102,6 +111,7 @@ class JointSpaceFit:
     dynamics: Dynamics
     sigma_q: np.ndarray
     sigma_v: np.ndarray | None
+    substeps: int
     defect: ca.Function  # (xk, xk1, uk, uk1, h, theta, phi) -> (defect, work, dE)
     theta_names: tuple[str, ...]
     phi_layout: tuple[tuple[str, str], ...]  # (joint, force param) per entry of phi
@@ -151,6 +161,8 @@ def build_joint_space_fit(
     energy_window_s: float = 1.0,
     energy_tolerance: float = 1e-3,
     sigma_q: np.ndarray | None = None,
+    substeps: int = 1,
+    friction_eps: np.ndarray | float | None = None,
 ) -> JointSpaceFit:
     """Build the fit of ``free`` parameters to ``recording`` (see the module docstring).
 
@@ -160,6 +172,9 @@ def build_joint_space_fit(
     parameters must be listed in ``free`` to be fitted, else they stay at the model's values.
     energy: "soft" (penalty with ``energy_weight``), "hard" (|residual| <= ``energy_tolerance`` ×
     energy scale) or "off".
+    substeps: collocation intervals per sample interval (>1 resolves fast transients such as
+    friction stops between samples).  friction_eps: width of the smooth sign [rad/s or m/s]
+    per joint; default :func:`friction_smoothing` of the recording.
     """
     if energy not in ("soft", "hard", "off"):
         raise KinemaforgeError(f"energy must be 'soft', 'hard' or 'off', got {energy!r}")
@@ -214,6 +229,7 @@ def build_joint_space_fit(
     # --- symbolic interval function (SX) ---------------------------------------------------
     theta = ca.SX.sym("theta", dyn.theta0.size)
     phi = ca.SX.sym("phi", len(phi_layout))
+    eps = friction_smoothing(rec) if friction_eps is None else np.broadcast_to(np.asarray(friction_eps, float), (n,))
 
     def passive(q, v):
         tau = [ca.SX(0)] * n
@@ -222,7 +238,7 @@ def build_joint_space_fit(
             for eff in effects[j]:
                 ps = _EFFECT_PARAMS[eff]
                 args = [phi[k + i] for i in range(len(ps))]
-                tau[ji] = tau[ji] + EFFECTS[eff].force(q[ji], v[ji], *args)
+                tau[ji] = tau[ji] + EFFECTS[eff].force(q[ji], v[ji], *args, eps=float(eps[ji]))
                 k += len(ps)
         return ca.vertcat(*tau)
 
@@ -250,9 +266,16 @@ def build_joint_space_fit(
 
     # --- the NLP ---------------------------------------------------------------------------
     T = rec.t.size
+    m = int(substeps)
+    if m < 1:
+        raise KinemaforgeError(f"substeps must be >= 1, got {substeps}")
+    t_grid = np.concatenate([np.linspace(a, b, m + 1)[:-1] for a, b in zip(rec.t[:-1], rec.t[1:])] + [rec.t[-1:]])
+    G = t_grid.size  # collocation points; samples sit at columns 0, m, 2m, …
     prob = Problem(f"calibrate_{model.name}")
     v0 = velocity_estimate(rec)
-    X = prob.variable("x", (2 * n, T), init=np.vstack([rec.q.T, v0.T]))
+    x_init = np.vstack([np.array([np.interp(t_grid, rec.t, c) for c in rec.q.T]), np.array([np.interp(t_grid, rec.t, c) for c in v0.T])])
+    X = prob.variable("x", (2 * n, G), init=x_init)
+    Xs = X[:, ::m]
     z = {}
     for b in blocks:
         z[b.name] = prob.variable(f"p:{b.name}", b.size, lower=b.lower / b.scale, upper=b.upper / b.scale, init=b.nominal / b.scale)
@@ -269,23 +292,23 @@ def build_joint_space_fit(
             phi_free[i] = (name, 0)
     phi_mx = ca.vertcat(*phi_entries) if phi_entries else ca.MX(0, 1)
 
-    U = rec.tau.T if rec.tau is not None else np.zeros((n, T))
-    H = np.diff(rec.t)[None, :]
-    mapped = interval.map(T - 1)
+    U = np.array([np.interp(t_grid, rec.t, c) for c in rec.tau.T]) if rec.tau is not None else np.zeros((n, G))
+    H = np.diff(t_grid)[None, :]
+    mapped = interval.map(G - 1)
     D, Wk, dE = mapped(X[:, :-1], X[:, 1:], U[:, :-1], U[:, 1:], H, theta_mx, phi_mx)
     prob.add_constraint("dynamics", D)
 
     sq = noise_std(rec.q) if sigma_q is None else np.broadcast_to(np.asarray(sigma_q, float), (n,))
-    Rq = (X[:n, :] - rec.q.T) / sq[:, None]
+    Rq = (Xs[:n, :] - rec.q.T) / sq[:, None]
     prob.add_cost("output_q", ca.sumsqr(Rq) / T)
     sv = None
     if rec.v is not None:
         sv = noise_std(rec.v)
-        prob.add_cost("output_v", ca.sumsqr((X[n:, :] - rec.v.T) / sv[:, None]) / T)
+        prob.add_cost("output_v", ca.sumsqr((Xs[n:, :] - rec.v.T) / sv[:, None]) / T)
 
     if energy != "off":
-        per = max(1, int(round(energy_window_s / rec.dt)))
-        edges = list(range(0, T - 1, per)) + [T - 1]
+        per = max(1, int(round(energy_window_s / rec.dt))) * m
+        edges = list(range(0, G - 1, per)) + [G - 1]
         resid = ca.vertcat(*[ca.sum2(dE[:, a:b]) - ca.sum2(Wk[:, a:b]) for a, b in zip(edges[:-1], edges[1:])])
         e_scale = _energy_scale(model, rec, v0)
         if energy == "soft":
@@ -298,11 +321,11 @@ def build_joint_space_fit(
             prob.add_constraint(f"unit_axis:{b.name[:-5]}", ca.sumsqr(z[b.name]) - 1.0)
 
     z_all = ca.vertcat(*[z[b.name] for b in blocks]) if blocks else ca.MX.sym("z", 0)
-    outputs = [ca.vec(Rq)] + ([ca.vec((X[n:, :] - rec.v.T) / sv[:, None])] if sv is not None else [])
+    outputs = [ca.vec(Rq)] + ([ca.vec((Xs[n:, :] - rec.v.T) / sv[:, None])] if sv is not None else [])
 
     return JointSpaceFit(
         problem=prob, model=model, recording=rec, blocks=blocks, effects=effects, dynamics=dyn,
-        sigma_q=sq, sigma_v=sv, defect=interval, theta_names=theta_names, phi_layout=tuple(phi_layout),
+        sigma_q=sq, sigma_v=sv, substeps=m, defect=interval, theta_names=theta_names, phi_layout=tuple(phi_layout),
         phi_fixed=phi_fixed, phi_free=phi_free,
         defects=ca.Function("defects", [X, z_all], [ca.vec(D)]),
         residuals=ca.Function("residuals", [X], [ca.vertcat(*outputs)]),

@@ -15,8 +15,9 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-# Smooth sign used inside the NLP: tanh(v / V_SMOOTH).  1 mm/s or 1 mrad/s: far below the
-# speeds at which friction matters for identification, yet smooth for IPOPT's Newton steps.
+# Default width of the smooth sign tanh(v / eps) [rad/s or m/s].  The joint-space fit widens it
+# to the velocity resolution of the recording (see nlp.joint_space.friction_smoothing): speeds
+# below what the data can resolve carry no information about the shape of sign(v).
 V_SMOOTH = 1e-3
 
 
@@ -43,7 +44,7 @@ class Effect:
 
     type: the DESIGN.md name.  params: parameter names; ``params[0]`` is the reported ``value``.
     units: (rotary unit, linear unit) of the value.  lower: lower bounds per parameter (physical
-    sign constraints).  force: generalised force (q, v, *params) -> force.  conservative: True if
+    sign constraints).  force: generalised force (q, v, *params, eps=smooth-sign width) -> force.  conservative: True if
     the force derives from a potential (its work is not dissipated).
     model_parameters: bridge parameters freed instead of a force (axis tilt, inertia error).
     """
@@ -57,12 +58,32 @@ class Effect:
     model_parameters: tuple[str, ...] = ()
 
 
-def _stribeck(q, v, excess, v_s):
+def _viscous(q, v, b, eps=V_SMOOTH):
+    return -b * v
+
+
+def _coulomb(q, v, f, eps=V_SMOOTH):
+    return -f * smooth_sign(v, eps)
+
+
+def _stribeck(q, v, excess, v_s, eps=V_SMOOTH):
     # Excess static friction decaying with speed: -(f_s - f_c) exp(-(v/v_s)^2) sign(v).
-    return -excess * _exp(-((v / v_s) ** 2)) * smooth_sign(v)
+    return -excess * _exp(-((v / v_s) ** 2)) * smooth_sign(v, eps)
 
 
-def _limit_contact(q, v, stop, k):
+def _spring(q, v, k, rest, eps=V_SMOOTH):
+    return -k * (q - rest)
+
+
+def _bias(q, v, c, eps=V_SMOOTH):
+    return c + 0 * v
+
+
+def _drag(q, v, d, eps=V_SMOOTH):
+    return -d * v * _abs(v)
+
+
+def _limit_contact(q, v, stop, k, eps=V_SMOOTH):
     # One-sided penalty spring beyond the stop, with the stop on the side the joint approaches:
     # a smooth ramp softplus(s (q - stop)) / s approximates max(q - stop, 0).
     s = 2000.0
@@ -74,10 +95,8 @@ def _limit_contact(q, v, stop, k):
 EFFECTS: dict[str, Effect] = {
     e.type: e
     for e in (
-        Effect("viscous_damping", ("damping",), ("N*m*s/rad", "N*s/m"), (0.0,), lambda q, v, b: -b * v),
-        Effect(
-            "coulomb_friction", ("coulomb",), ("N*m", "N"), (0.0,), lambda q, v, f: -f * smooth_sign(v)
-        ),
+        Effect("viscous_damping", ("damping",), ("N*m*s/rad", "N*s/m"), (0.0,), _viscous),
+        Effect("coulomb_friction", ("coulomb",), ("N*m", "N"), (0.0,), _coulomb),
         Effect(
             "stribeck_friction", ("stribeck", "v_stribeck"), ("N*m", "N"), (0.0, 1e-3), _stribeck
         ),
@@ -86,11 +105,11 @@ EFFECTS: dict[str, Effect] = {
             ("spring_stiffness", "spring_rest"),
             ("N*m/rad", "N/m"),
             (0.0, -np.inf),
-            lambda q, v, k, rest: -k * (q - rest),
+            _spring,
             conservative=True,
         ),
-        Effect("constant_bias", ("bias",), ("N*m", "N"), (-np.inf,), lambda q, v, c: c + 0 * v),
-        Effect("quadratic_drag", ("drag",), ("N*m*s^2/rad^2", "N*s^2/m^2"), (0.0,), lambda q, v, d: -d * v * _abs(v)),
+        Effect("constant_bias", ("bias",), ("N*m", "N"), (-np.inf,), _bias),
+        Effect("quadratic_drag", ("drag",), ("N*m*s^2/rad^2", "N*s^2/m^2"), (0.0,), _drag),
         Effect("limit_contact", ("limit_stop", "limit_stiffness"), ("rad", "m"), (-np.inf, 0.0), _limit_contact),
         Effect("axis_tilt", ("axis",), ("rad", "rad"), (), None, model_parameters=("axis",)),
         Effect("inertia_error", ("inertia_ratio",), ("1", "1"), (), None, model_parameters=("inertia",)),

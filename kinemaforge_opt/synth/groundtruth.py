@@ -149,6 +149,16 @@ class _ForceEffects:
         return f
 
 
+def _centred_means(per_step: np.ndarray, decim: int) -> np.ndarray:
+    """(S, k) per-step values -> (ceil(S/decim), k) means over the ``decim`` steps centred on
+    every ``decim``-th step (windows clipped at the ends)."""
+    half = decim // 2
+    rows = []
+    for c in range(0, per_step.shape[0], decim):
+        rows.append(per_step[max(0, c - half) : c - half + decim].mean(axis=0))
+    return np.asarray(rows)
+
+
 def simulate(model: ArticulatedModel, handles: dict[str, Handle], effects: tuple[ConcealedEffect, ...] = (),
              plan: HandPlan = HandPlan(), record_hz: int = 120, q0: np.ndarray | None = None) -> Episode:
     """Run the hand plan on every movable joint in turn (``plan.goals`` strokes each) in MuJoCo,
@@ -178,7 +188,8 @@ def simulate(model: ArticulatedModel, handles: dict[str, Handle], effects: tuple
     strokes = [(i, g) for i in range(len(names)) for g in plan.goals]
     n_steps = int(round(len(strokes) * plan.stroke_s * SIM_HZ))
     decim = SIM_HZ // record_hz
-    rec = {k: [] for k in ("t", "q", "v", "tau", "p", "f", "T")}
+    rec = {k: [] for k in ("t", "q", "v", "p", "T")}
+    taus, forces_world = [], []  # every simulation step
     jacp = np.zeros((3, mj.nv))
     w = 2 * np.pi * plan.bandwidth_hz
     q_start = None
@@ -213,13 +224,13 @@ def simulate(model: ArticulatedModel, handles: dict[str, Handle], effects: tuple
             if norm > plan.max_force:
                 f_world *= plan.max_force / norm
             tau_hand = np.array([jacp[:, d] @ f_world for d in dof])
+        taus.append(tau_hand)
+        forces_world.append(f_world)
         if step % decim == 0:
             rec["t"].append(t)
             rec["q"].append(data.qpos[qadr].copy())
             rec["v"].append(data.qvel[dof].copy())
-            rec["tau"].append(tau_hand)
             rec["p"].append(p_grip)
-            rec["f"].append(f_world)
             Ts = np.tile(np.eye(4), (len(body_ids), 1, 1))
             Ts[:, :3, :3] = data.xmat[body_ids].reshape(-1, 3, 3)
             Ts[:, :3, 3] = data.xpos[body_ids]
@@ -230,4 +241,9 @@ def simulate(model: ArticulatedModel, handles: dict[str, Handle], effects: tuple
         data.qfrc_applied[dof] = tau_hand + [fe(data.qpos[a], data.qvel[d]) for fe, a, d in zip(forces, qadr, dof)]
         mujoco.mj_step2(mj, data)  # forces, constraints and integration
     a = {k: np.asarray(v) for k, v in rec.items()}
+    # A force sensor averages over its sample period: record the mean hand force over the
+    # simulation steps centred on each sample, so replaying the samples (linearly interpolated)
+    # delivers the impulse the hand really applied, even through its fast feedback transients.
+    a["tau"] = _centred_means(np.asarray(taus), decim)
+    a["f"] = _centred_means(np.asarray(forces_world), decim)
     return Episode(a["t"], names, a["q"], a["v"], a["tau"], a["p"], a["f"], model.link_names, a["T"])
