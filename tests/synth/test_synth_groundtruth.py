@@ -133,11 +133,15 @@ def test_recorded_hand_force_is_the_generalised_force(door, drawer):
     ep = simulate(drawer.model, drawer.handles, (), plan)
     axis = drawer.model.joint("drawer_0_joint").axis
     np.testing.assert_allclose(ep.tau[:, 0], ep.force_world @ axis, atol=1e-9)
-    assert np.all(ep.force_world[ep.t >= plan.push_s] == 0) and np.abs(ep.tau[ep.t < plan.push_s]).max() > 1
+    # Samples average the force over their period: zero from one period after the release.
+    period = ep.t[1] - ep.t[0]
+    assert np.all(ep.force_world[ep.t >= plan.push_s + period] == 0) and np.abs(ep.tau[ep.t < plan.push_s]).max() > 1
     ep = simulate(door.model, door.handles, (), plan)
     hinge = door.model.joint("door_joint").T_parent_joint[:3, 3]
     moment = np.cross(ep.grip_world - hinge, ep.force_world) @ door.model.joint("door_joint").axis
-    np.testing.assert_allclose(ep.tau[:, 0], moment, atol=1e-9)
+    # Force and torque are averaged over the sample period while the grip point is sampled: the
+    # lever arm moves little within one period.
+    np.testing.assert_allclose(ep.tau[:, 0], moment, rtol=2e-2, atol=1e-2)
 
 
 def test_multi_joint_object_moves_each_joint_in_turn():
