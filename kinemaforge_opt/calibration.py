@@ -28,7 +28,7 @@ _UNITS = {
     "v_stribeck": ("rad/s", "m/s"), "spring_stiffness": ("N*m/rad", "N/m"), "spring_rest": ("rad", "m"),
     "bias": ("N*m", "N"), "drag": ("N*m*s^2/rad^2", "N*s^2/m^2"), "limit_stop": ("rad", "m"),
     "limit_stiffness": ("N*m/rad", "N/m"), "axis": ("1", "1"), "origin": ("m", "m"), "pitch": ("m/rad", "m/rad"),
-    "armature": ("kg*m^2", "kg"), "inertia": ("kg, kg*m, kg*m^2", "kg, kg*m, kg*m^2"), "gravity": ("m/s^2", "m/s^2"),
+    "armature": ("kg*m^2", "kg"), "inertia_ratio": ("1", "1"), "inertia": ("kg, kg*m, kg*m^2", "kg, kg*m, kg*m^2"), "gravity": ("m/s^2", "m/s^2"),
 }
 
 
@@ -111,6 +111,9 @@ def apply_parameters(model: ArticulatedModel, values: dict[str, np.ndarray]) -> 
             out = out.with_joint(owner, dynamics=dataclasses.replace(j.dynamics, armature=float(value[0])))
         elif field == "inertia":
             out = out.with_link(owner, inertial=Inertial.from_dynamic_parameters(value))
+        elif field == "inertia_ratio":
+            base = model.link(owner).inertial
+            out = out.with_link(owner, inertial=Inertial.from_dynamic_parameters(base.dynamic_parameters() * value[0]))
     return out
 
 

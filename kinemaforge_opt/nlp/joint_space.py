@@ -189,7 +189,8 @@ def build_joint_space_fit(
         raise DataError("recording shows no motion: every joint stays at its initial position")
 
     bridge_names = set(available_parameters(model))
-    valid = bridge_names | set(force_parameter_names(model))
+    ratio_names = {f"{l}.inertia_ratio" for l in model.link_names[1:]}
+    valid = bridge_names | set(force_parameter_names(model)) | ratio_names
     for name in free:
         if name not in valid:
             raise UnknownNameError("free parameter", name, valid)
@@ -201,7 +202,10 @@ def build_joint_space_fit(
             if eff not in effects[joint]:
                 effects[joint] = effects[joint] + (eff,)
 
-    theta_names = tuple(n for n in free if n in bridge_names)
+    # A ratio frees the link's inertia block in the bridge, tied to ratio × nominal.
+    theta_names = tuple(n for n in free if n in bridge_names) + tuple(
+        n[: -len("_ratio")] for n in free if n in ratio_names and n[: -len("_ratio")] not in free
+    )
     dyn = build_dynamics(model, free=theta_names)
     scales = data_scales(model, rec)
     n = model.nq
@@ -220,6 +224,8 @@ def build_joint_space_fit(
     for name in free:
         if name in bridge_names:
             nominal = dyn.parameter(name).nominal
+        elif name in ratio_names:
+            nominal = np.array([1.0])
         else:
             joint, field = name.rsplit(".", 1)
             nominal = np.array([nominal_force_parameters(model, joint)[field]])
@@ -279,7 +285,14 @@ def build_joint_space_fit(
     z = {}
     for b in blocks:
         z[b.name] = prob.variable(f"p:{b.name}", b.size, lower=b.lower / b.scale, upper=b.upper / b.scale, init=b.nominal / b.scale)
-    theta_mx = ca.vertcat(*[z[b.name] * b.scale for b in blocks if b.name in theta_names]) if theta_names else ca.MX(0, 1)
+    theta_parts = []
+    for name in theta_names:
+        if name in z:
+            b = next(b for b in blocks if b.name == name)
+            theta_parts.append(z[name] * b.scale)
+        else:  # tied to an inertia ratio
+            theta_parts.append(z[name + "_ratio"][0] * dyn.parameter(name).nominal)
+    theta_mx = ca.vertcat(*theta_parts) if theta_parts else ca.MX(0, 1)
     phi_free = {}
     phi_entries = []
     for i, (j, p) in enumerate(phi_layout):

@@ -106,6 +106,9 @@ def make_block(model: ArticulatedModel, name: str, nominal: np.ndarray, scales: 
         length = max(np.linalg.norm(nominal[1:4]) / m, 0.05)
         scale = np.concatenate([[m], np.full(3, m * length), np.full(6, max(np.abs(nominal[4:]).max(), m * length**2))])
         lower[0] = 0.0
+    elif field == "inertia_ratio":
+        scale = np.ones(1)
+        lower[:] = 1e-3
     elif field == "gravity":
         scale = np.ones(3)
     else:  # pragma: no cover - names are validated before

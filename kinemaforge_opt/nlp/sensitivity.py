@@ -33,6 +33,22 @@ class Sensitivity:
     dof: int
 
 
+def lag1_autocorrelation(residuals: np.ndarray) -> float:
+    """Pooled lag-1 autocorrelation of residual series (rows = series, time along axis 1),
+    clipped to [0, 0.99]."""
+    r = np.atleast_2d(residuals)
+    r = r - r.mean(axis=1, keepdims=True)
+    num = float(np.sum(r[:, 1:] * r[:, :-1]))
+    den = float(np.sum(r * r))
+    return float(np.clip(num / den if den > 0 else 0.0, 0.0, 0.99))
+
+
+def ar1_inflation(residuals: np.ndarray) -> float:
+    """Variance inflation (1 + rho)/(1 - rho) of the mean of AR(1)-correlated residuals."""
+    rho = lag1_autocorrelation(residuals)
+    return (1 + rho) / (1 - rho)
+
+
 def _tangent_basis(a: np.ndarray) -> np.ndarray:
     a = a / np.linalg.norm(a)
     helper = np.eye(3)[np.argmin(np.abs(a))]
@@ -93,7 +109,10 @@ def fit_sensitivity(fit: JointSpaceFit, X: np.ndarray, z: np.ndarray, rel_tol: f
     Jr = J @ P
     F = Jr.T @ Jr
     dof = max(r.size - F.shape[0], 1)
-    s2 = float(r @ r) / dof
+    # Residual variance, inflated by the AR(1) variance factor (1 + rho)/(1 - rho) of the
+    # residuals' lag-1 autocorrelation: model-form error makes residuals correlated in time, and
+    # treating them as independent would understate the uncertainty.
+    s2 = float(r @ r) / dof * ar1_inflation(r.reshape(-1, T) if r.size % T == 0 else r[None, :])
 
     d = np.sqrt(np.maximum(np.diag(F), 1e-300))
     Fn = F / np.outer(d, d)
