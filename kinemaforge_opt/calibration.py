@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import KinemaforgeError
 from .io.recording import Recording
 from .model.articulated import ArticulatedModel, Inertial
 from .nlp.joint_space import JointSpaceFit, build_joint_space_fit
@@ -128,14 +129,24 @@ def calibrate(
     print_level: int = 0,
     substeps: int = 1,
     friction_eps: float | None = None,
+    method: str = "collocation",
 ) -> Calibration:
     """Fit ``free`` parameters of ``model`` to ``recording`` (joint-space NLP, IPOPT).
 
     free: parameter names (``kinemaforge_opt.nlp.parameters``); default: viscous damping and
     Coulomb friction of every movable joint.  effects: extra force effects per joint.
     energy: "soft" | "hard" | "off" (see :mod:`kinemaforge_opt.nlp.joint_space`).
+    method: "collocation" (output error on q by direct collocation; any recording) or
+    "inverse_dynamics" (torque error through RNEA on filtered states; needs recorded tau, scales
+    to long high-rate recordings such as a 1 kHz robot arm; :mod:`kinemaforge_opt.nlp.inverse_dynamics`).
     Raises for bad input (unknown names, missing joints, no motion) before any work starts.
     """
+    if method == "inverse_dynamics":
+        from .nlp.inverse_dynamics import calibrate_inverse_dynamics
+
+        return calibrate_inverse_dynamics(model, recording, free=free, effects=effects, max_iter=max_iter)
+    if method != "collocation":
+        raise KinemaforgeError(f"method must be 'collocation' or 'inverse_dynamics', got {method!r}")
     if free is None:
         free = [f"{j}.{p}" for j in model.joint_names for p in ("damping", "coulomb")]
     start = time.perf_counter()

@@ -48,3 +48,13 @@ def random_tree(rng: np.random.Generator, n_joints: int = 7, kinds=ALL_KINDS) ->
             )
         )
     return ArticulatedModel("random_tree", tuple(links), tuple(joints))
+
+
+def shared_data_dir():
+    """The project's shared real recordings: ``../shared/data`` beside the repository
+    (override with KINEMAFORGE_SHARED_DATA)."""
+    import os
+    from pathlib import Path
+
+    env = os.environ.get("KINEMAFORGE_SHARED_DATA")
+    return Path(env) if env else Path(__file__).resolve().parents[2] / "shared" / "data"

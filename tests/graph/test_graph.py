@@ -1,5 +1,6 @@
 """Each graph stage alone on exact synthetic tracks, then the real Sturm logs."""
 
+from factories import shared_data_dir
 import glob
 import json
 
@@ -12,7 +13,7 @@ from kinemaforge_opt.graph import fit_all, infer_tree, relative_motion, score_pa
 from kinemaforge_opt.io.tracks import PoseTracks, read_sturm_log, write_tracks
 from kinemaforge_opt.spatial import axis_angle_error, line_distance, screw_motion, translation_motion
 
-STURM = "/work/shared/data/real/articulation/mechanisms_iros_2010"
+STURM = str(shared_data_dir() / "real" / "articulation" / "mechanisms_iros_2010")
 T = 30
 ANGLES = np.linspace(0.0, 1.2, T)
 AXIS = np.array([0.0, 0.1, 1.0]) / np.linalg.norm([0.0, 0.1, 1.0])

@@ -1,3 +1,4 @@
+from factories import shared_data_dir
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -5,7 +6,7 @@ from scipy.spatial.transform import Rotation
 from kinemaforge_opt.errors import InputFileError
 from kinemaforge_opt.io.tracks import PoseTracks, read_sturm_log, read_tracks, write_tracks
 
-STURM = "/work/shared/data/real/articulation/mechanisms_iros_2010"
+STURM = str(shared_data_dir() / "real" / "articulation" / "mechanisms_iros_2010")
 
 
 def _tracks(full=True):
