@@ -1,0 +1,110 @@
+"""The mismatch-discovery benchmark: ``diagnose`` vs ID-LS vs PySINDy on the concealed-effects
+set (each effect alone on a door and a drawer, pairs, null cases).
+
+Per case and method: the effect types reported, true positives (type match), false positives,
+missed effects, the relative value error of each true positive, and the held-out RMS of the
+prediction before (nominal model) and after (augmented with what the method found).  A concealed
+``limit_contact`` whose stop the motion never reached is not in the truth set (nothing in the
+data shows it); no method has a limit-contact hypothesis, so a reached stop counts as missed.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .baselines import BaselineResult, idls, sindy, split
+from .predict import augmented, predict
+from .recordings import effect_recording
+
+METHODS = ("diagnose", "ID-LS", "PySINDy (STLSQ)")
+HOLDOUT = 0.25
+
+
+@dataclass(frozen=True)
+class CaseScore:
+    """One method on one case.  ``value_error``: effect type -> |found - true| / |true| for true
+    positives.  RMS in rad or m on the held-out span."""
+
+    case: str
+    method: str
+    truth: tuple[str, ...]
+    found: tuple[str, ...]
+    true_positives: int
+    false_positives: int
+    missed: int
+    value_error: dict[str, float]
+    rms_before: float | None
+    rms_after: float | None
+    time_s: float
+
+
+def _score(case: str, method: str, truth: dict[str, float], found: dict[str, float],
+           rms: tuple[float | None, float | None], time_s: float) -> CaseScore:
+    tp = set(truth) & set(found)
+    err = {t: abs(found[t] - truth[t]) / abs(truth[t]) for t in sorted(tp)}
+    return CaseScore(case, method, tuple(sorted(truth)), tuple(sorted(found)), len(tp), len(set(found) - tp),
+                     len(set(truth) - tp), err, rms[0], rms[1], time_s)
+
+
+def _baseline_after(model, held, res: BaselineResult) -> float:
+    from .library import force_law
+
+    ratios = {j: 1.0 - c["id"] for j, c in res.coefs.items() if c.get("id", 0.0) != 0.0 and c["id"] < 1.0}
+    laws = {j: force_law(res.libraries[j], c) for j, c in res.coefs.items() if any(c.values())}
+    q = predict(augmented(model, ratios), held, laws)
+    return float(np.sqrt(np.mean((q - held.q) ** 2)))
+
+
+def run_case(case: str, noise_seed: int = 0) -> list[CaseScore]:
+    """Score the three methods on catalogue case ``case`` with encoder-noise seed ``noise_seed``."""
+    from ..physics.diagnose import diagnose
+
+    er = effect_recording(case, noise_seed)
+    truth = {e.type: e.value for e in er.effects if e.type != "limit_contact" or er.stop_reached}
+    _, held = split(er.recording.select(er.model.joint_names), HOLDOUT)
+    t0 = time.perf_counter()
+    d = diagnose(er.model, er.recording, holdout_fraction=HOLDOUT)
+    t_diag = time.perf_counter() - t0
+    rms_before = d.held_out.rms_before if d.held_out else None
+    out = [_score(case, "diagnose", truth, {e.type: e.value for e in d.effects},
+                  (rms_before, d.held_out.rms_after if d.held_out else None), t_diag)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # STLSQ warns each time a threshold removes every term
+        for fn in (idls, sindy):
+            res = fn(er.model, er.recording, HOLDOUT)
+            after = _baseline_after(er.model, held, res) if held is not None else None
+            out.append(_score(case, res.method, truth, {e.type: e.value for e in res.effects},
+                              (rms_before, after), res.time_s))
+    return out
+
+
+def summarise(scores: list[CaseScore]) -> dict[str, dict]:
+    """Per method: effect-type precision, recall and F1 (micro over cases), false positives on
+    null cases, median relative value error, median held-out RMS improvement (before / after)."""
+    out = {}
+    for m in METHODS:
+        s = [x for x in scores if x.method == m]
+        if not s:
+            continue
+        tp, fp, fn = (sum(getattr(x, k) for x in s) for k in ("true_positives", "false_positives", "missed"))
+        errs = [e for x in s for e in x.value_error.values()]
+        gains = [x.rms_before / x.rms_after for x in s if x.rms_before and x.rms_after and x.truth]
+        out[m] = {
+            "cases": len(s),
+            "precision": tp / (tp + fp) if tp + fp else None,
+            "recall": tp / (tp + fn) if tp + fn else None,
+            "f1": 2 * tp / (2 * tp + fp + fn) if tp + fp + fn else None,
+            "null_false_positives": sum(x.false_positives for x in s if not x.truth),
+            "median_value_error": float(np.median(errs)) if errs else None,
+            "median_heldout_gain": float(np.median(gains)) if gains else None,
+            "mean_time_s": float(np.mean([x.time_s for x in s])),
+        }
+    return out
+
+
+def as_dicts(scores: list[CaseScore]) -> list[dict]:
+    return [asdict(s) for s in scores]

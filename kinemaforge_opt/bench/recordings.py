@@ -1,0 +1,57 @@
+"""Concealed-effect recordings for the discovery benchmark, made the way ``kinemaforge demo``
+makes its recording: the catalogue case's object and effects simulated in MuJoCo (the
+independent ground truth), one hand stroke that stays inside the joint range, sampled at 30 Hz
+with 2 mrad (or 2 mm) Gaussian encoder noise and the hand's generalised force as ``tau``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..io.recording import Recording
+from ..model.articulated import ArticulatedModel
+from ..synth.effects import ConcealedEffect
+
+RATE_HZ = 30
+NOISE = 2e-3  # encoder noise std [rad or m]
+
+
+@dataclass(frozen=True)
+class EffectRecording:
+    """A case's nominal ``model``, noisy ``recording``, the concealed ``effects`` and whether
+    each concealed limit stop was reached by the true motion (``stop_reached``)."""
+
+    case: str
+    model: ArticulatedModel
+    recording: Recording
+    effects: tuple[ConcealedEffect, ...]
+    stop_reached: bool
+
+
+def stroke_plan():
+    """The demo's hand plan: one stroke to mid-range, released, then free."""
+    from ..synth.groundtruth import HandPlan
+
+    return HandPlan(goals=(0.5,), push_s=0.8, free_s=1.7, release_speed=0.15)
+
+
+def effect_recording(case_name: str, noise_seed: int = 0, rate_hz: int = RATE_HZ) -> EffectRecording:
+    """Simulate catalogue case ``case_name`` and return its noisy joint-space recording."""
+    from problems.catalogue import get_case
+
+    from ..synth.groundtruth import simulate
+    from ..synth.objects import make_object
+
+    case = get_case(case_name)
+    obj = make_object(case.category, case.seed)
+    ep = simulate(obj.model, obj.handles, case.effects, plan=stroke_plan(), record_hz=rate_hz)
+    rng = np.random.default_rng(noise_seed)
+    q = ep.q + rng.normal(0.0, NOISE, ep.q.shape)
+    reached = False
+    for e in case.effects:
+        if e.type == "limit_contact":
+            k = ep.joint_names.index(e.joint)
+            beyond = ep.q[:, k] > e.value if e.param("side") == "upper" else ep.q[:, k] < e.value
+            reached = reached or bool(beyond.any())
+    return EffectRecording(case_name, obj.model, Recording(ep.t, ep.joint_names, q, tau=ep.tau), case.effects, reached)
