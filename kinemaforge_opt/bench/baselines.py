@@ -9,7 +9,10 @@
   threshold is swept over the path of the data's own coefficient magnitudes and the sparsity
   chosen by the same ΔBIC rule (Mangan et al. 2017, information criteria for SINDy).
 
-Both use the same fit / held-out split as ``diagnose`` and the same evidence rule: BIC on the
+Both regress only the samples where every joint moves (speed above ``THRESHOLD_SIGMA`` times the
+velocity noise): at standstill, dry friction holds whatever force is applied and is no function
+of sign(v), the usual exclusion in friction identification.  Both use the same fit / held-out
+split as ``diagnose`` and the same evidence rule: BIC on the
 effective number of independent residuals N(1 - ρ)/(1 + ρ) (ρ: lag-1 autocorrelation), the
 same threshold (:data:`kinemaforge_opt.physics.diagnose.DELTA_BIC`).  Neither is told the
 concealed effects.
@@ -26,7 +29,8 @@ from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..nlp.sensitivity import lag1_autocorrelation
 from ..physics.diagnose import DELTA_BIC
-from ..physics.locate import inverse_dynamics_residual
+from ..nlp.joint_space import noise_std
+from ..physics.locate import THRESHOLD_SIGMA, inverse_dynamics_residual, smooth_derivatives
 from ..synth.effects import unit_of
 from .library import GROUPS, NONNEGATIVE, JointLibrary, joint_library, selected_effects
 
@@ -71,6 +75,14 @@ def split(rec: Recording, holdout_fraction: float) -> tuple[Recording, Recording
     return fit, held
 
 
+def velocity_noise(rec: Recording) -> np.ndarray:
+    """(n,) std of the smoothed velocity's noise [rad/s or m/s]: the encoder noise of each joint
+    times the gain of the very smoother the regressions use (measured on unit white noise)."""
+    unit = np.random.default_rng(0).normal(size=rec.q.shape)
+    _, v, _ = smooth_derivatives(Recording(rec.t, rec.joint_names, unit))
+    return noise_std(rec.q) * np.std(v, axis=0)
+
+
 def _data(model: ArticulatedModel, rec: Recording) -> _Data:
     import pinocchio as pin
 
@@ -78,10 +90,12 @@ def _data(model: ArticulatedModel, rec: Recording) -> _Data:
 
     rec = rec.select(model.joint_names)
     r, q, v, a = inverse_dynamics_residual(model, rec)
+    moving = np.all(np.abs(v) > THRESHOLD_SIGMA * velocity_noise(rec), axis=1)
     tau = rec.tau if rec.tau is not None else np.zeros_like(q)
     joints = model.movable_joints
     passive = np.stack([j.dynamics.passive_force(q[:, k], v[:, k]) for k, j in enumerate(joints)], axis=1)
     id_force = r + tau + passive
+    r, q, v, id_force = r[moving], q[moving], v[moving], id_force[moving]
     pm = build_pin_model(model)
     pd = pm.createData()
     Minv = np.array([pin.computeMinverse(pm, pd, qq) for qq in q])

@@ -1,0 +1,36 @@
+"""Batch on Ray: failure isolation and skip-on-rerun, with a trivial job."""
+
+import json
+from pathlib import Path
+
+from kinemaforge_opt.batch import run_batch, summary_table
+
+
+def _double(input_dir, out_dir):
+    x = float((Path(input_dir) / "x.txt").read_text())
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    (Path(out_dir) / "y.txt").write_text(str(2 * x))
+    return {"y": 2 * x}
+
+
+def test_corrupt_input_is_reported_and_others_finish_then_skipped(tmp_path):
+    inputs = []
+    for name, text in (("a", "1"), ("bad", "not a number"), ("c", "3")):
+        d = tmp_path / "in" / name
+        d.mkdir(parents=True)
+        (d / "x.txt").write_text(text)
+        inputs.append(d)
+    out = tmp_path / "out"
+    items = run_batch(inputs, out, _double, workers=2, progress=False)
+    status = {it.name: it.status for it in items}
+    assert status == {"a": "ok", "bad": "error", "c": "ok"}
+    assert "ValueError" in items[1].error
+    assert json.loads((out / "bad" / "status.json").read_text())["status"] == "error"
+    assert (out / "c" / "y.txt").read_text() == "6.0"
+    table = summary_table(items)
+    assert "2 done" in table and "1 failed" in table
+
+    (tmp_path / "in" / "bad" / "x.txt").write_text("5")  # fixed: re-run retries it, skips the rest
+    again = run_batch(inputs, out, _double, workers=2, progress=False)
+    assert [it.status for it in again] == ["skipped", "ok", "skipped"]
+    assert again[0].result == {"y": 2.0}

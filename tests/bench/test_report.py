@@ -1,0 +1,42 @@
+"""The bench table writer on a tiny hand-made subset (structure only, not a measurement)."""
+
+import json
+
+from kinemaforge_opt.bench.discovery import CaseScore, as_dicts, summarise
+from kinemaforge_opt.bench.report import NOT_MEASURED, write_report
+
+
+def _result():
+    scores = [
+        CaseScore("effect_door_spring", "diagnose", ("spring",), ("spring",), 1, 0, 0, {"spring": 0.02}, 0.04, 0.004, 5.0),
+        CaseScore("effect_door_spring", "ID-LS", ("spring",), ("constant_bias",), 0, 1, 1, {}, 0.04, 0.05, 0.01),
+        CaseScore("null_door", "diagnose", (), (), 0, 0, 0, {}, 0.01, 0.01, 3.0),
+        CaseScore("null_door", "ID-LS", (), ("viscous_damping",), 0, 1, 0, {}, 0.01, 0.02, 0.01),
+    ]
+    return {
+        "size": "test", "machine": "test", "total_s": 1.0,
+        "discovery": {"summary": summarise(scores), "cases": as_dicts(scores)},
+        "sturm": {}, "calibration": [{"seed": 0, "converged": True, "axis_error_deg": 0.1, "damping": 0.21,
+                                      "damping_rel_error": 0.05, "coulomb": 0.3, "coulomb_rel_error": 0.0,
+                                      "samples": 76, "solve_time_s": 1.0}],
+        "scaling": {"points": [{"rate_hz": 30, "samples": 76, "time_s": 1.0, "iterations": 5, "converged": True},
+                               {"rate_hz": 60, "samples": 151, "time_s": 4.0, "iterations": 5, "converged": True}],
+                    "exponent": 2.0},
+        "stage_time_s": {"diagnose per case (diagnose)": 4.0},
+    }
+
+
+def test_summary_scores():
+    s = _result()["discovery"]["summary"]
+    assert s["diagnose"]["f1"] == 1.0 and s["diagnose"]["null_false_positives"] == 0
+    assert s["ID-LS"]["f1"] == 0.0 and s["ID-LS"]["null_false_positives"] == 1
+    assert s["diagnose"]["median_heldout_gain"] == 10.0
+
+
+def test_write_report(tmp_path):
+    paths = write_report(_result(), tmp_path)
+    md = paths["markdown"].read_text()
+    assert "Mismatch discovery" in md and "| diagnose | 2 |" in md
+    assert md.count(NOT_MEASURED) >= 6 * 5 + 5 * 5  # Table 1 and Table 2 cells are placeholders
+    assert json.loads(paths["json"].read_text())["size"] == "test"
+    assert paths["scaling"].stat().st_size > 0 and paths["discovery"].stat().st_size > 0
