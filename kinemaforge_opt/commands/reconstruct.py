@@ -1,4 +1,5 @@
-"""``kinemaforge reconstruct``: pose tracks (or real Sturm logs) -> kinematic tree -> reconstruction.json."""
+"""``kinemaforge reconstruct``: an RGB-D sequence, pose tracks or real Sturm logs -> kinematic tree ->
+reconstruction.json (and, from a sequence, model.urdf, meshes/ and clouds.npz)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from ..graph import infer_tree
 from ..graph.tree import GraphResult
 from ..io.atomic import write_text_atomic
 from ..io.tracks import read_sturm_log, read_tracks
+from ..perception.reconstruct import DEFAULT_DENSITY, reconstruct_sequence
 
 HELP = """\
 Infer the kinematic tree of an articulated object from part pose tracks and write
@@ -18,6 +20,9 @@ OUT/reconstruction.json (joints: name, type, parent, child, axis_world, origin_w
 radius for revolute/helical, confidence).
 
 INPUT is one of
+  a sequence      a kinemaforge.rgbd/1 folder (sequence.json inside): depth -> point clouds ->
+                  moving parts -> SE(3) tracks -> tree; also writes OUT/model.urdf,
+                  OUT/meshes/<link>.obj (convex hulls, mass from --density) and OUT/clouds.npz
   tracks.csv      t,track,x,y,z,qx,qy,qz,qw (full pose) or t,track,x,y,z (position only),
                   world frame, metres, seconds, quaternion order xyzw
   NNN.log         a real Sturm articulation log: 'x y z' per line (a gripper path, no time)
@@ -37,11 +42,13 @@ def register(subparsers) -> None:
         epilog="examples:\n  kinemaforge reconstruct tracks.csv -o out/rec\n"
         "  kinemaforge reconstruct ../shared/data/real/articulation/mechanisms_iros_2010/drawer -o out/drawer\n",
     )
-    p.add_argument("input", type=Path, help="tracks.csv, a Sturm .log file, or a folder of .log files")
+    p.add_argument("input", type=Path, help="an RGB-D sequence folder, tracks.csv, a Sturm .log file, or a folder of .log files")
     p.add_argument("-o", "--out", type=Path, required=True, help="output folder (created)")
     p.add_argument("--method", choices=("graph", "greedy"), default="graph",
                    help="'graph' (constraint graph + arborescence, default) or 'greedy' (ablation)")
     p.add_argument("--k-best", type=int, default=3, help="trees to keep (best + alternatives), default 3")
+    p.add_argument("--density", type=float, default=DEFAULT_DENSITY,
+                   help=f"part density for masses from the meshes [kg/m³] (RGB-D input), default {DEFAULT_DENSITY:g}")
     p.set_defaults(func=run)
 
 
@@ -75,6 +82,8 @@ def run(args) -> int:
     src: Path = args.input
     if not src.exists():
         raise InputFileError(f"input {str(src)!r} does not exist")
+    if src.is_dir() and (src / "sequence.json").is_file():
+        return _run_sequence(args)
     if src.is_dir():
         logs = sorted(src.glob("*.log"))
         if not logs:
@@ -98,4 +107,14 @@ def run(args) -> int:
     for j in doc["joints"]:
         radius = f" radius {j['radius']:.3f} m" if "radius" in j else ""
         print(f"{j['name']}: {j['type']} {j['parent']} -> {j['child']}{radius} (ρ = {j['confidence']:.2f})")
+    return 0
+
+
+def _run_sequence(args) -> int:
+    rec = reconstruct_sequence(args.input, args.out, method=args.method, k_best=args.k_best, density=args.density)
+    for j in rec.document["joints"]:
+        print(f"{j['name']}: {j['type']} {j['parent']} -> {j['child']} axis {[round(a, 3) for a in j['axis_world']]} "
+              f"(ρ = {j['confidence']:.2f})")
+    print(f"wrote {args.out / 'reconstruction.json'}, model.urdf, meshes/, clouds.npz "
+          f"({rec.document['timing_s']['total']:.1f} s)")
     return 0
