@@ -8,8 +8,9 @@ EPILOG = """\
 sizes:
   --quick   every concealed-effect and null case with one noise seed, one demo-door seed,
             calibrate scaling at 30/60/120 Hz: under 10 minutes on 2 cores
-  (full)    three noise seeds, three demo-door seeds, scaling up to 400 Hz (see the bench
-            module docs for its measured runtime)
+  (full)    three noise seeds, three demo-door seeds, scaling up to 400 Hz: about three times
+            the quick discovery time plus the 240/400 Hz calibrations (calibrate time grows
+            about as samples^2); its runtime is written to bench.json ("total_s")
 
 outputs: DIR/bench.json, DIR/bench.md, DIR/scaling.png, DIR/discovery.png
 """
