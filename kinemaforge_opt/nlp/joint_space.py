@@ -73,6 +73,22 @@ def friction_smoothing(rec: Recording) -> np.ndarray:
     return np.maximum(0.03 * np.sqrt(np.mean(v**2, axis=0)), 1e-4)
 
 
+def limit_side(model: ArticulatedModel, rec: Recording) -> dict[str, tuple[float, float]]:
+    """Per joint, the stop the recording comes closest to: (side, position) with side +1 for the
+    upper limit, -1 for the lower; a joint without finite limits gets its recorded extreme."""
+    out = {}
+    for k, j in enumerate(model.movable_joints):
+        lo, hi = float(np.min(rec.q[:, k])), float(np.max(rec.q[:, k]))
+        lim = j.limits
+        if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
+            out[j.name] = (1.0, hi)
+        elif lo - lim.lower < lim.upper - hi:
+            out[j.name] = (-1.0, lim.lower)
+        else:
+            out[j.name] = (1.0, lim.upper)
+    return out
+
+
 def velocity_estimate(rec: Recording) -> np.ndarray:
     """Recorded v, or central differences of q (T, n)."""
     return rec.v if rec.v is not None else np.gradient(rec.q, rec.t, axis=0)
@@ -214,6 +230,7 @@ def build_joint_space_fit(
     phi_layout, phi_fixed = [], []
     for j in model.joint_names:
         nominal = nominal_force_parameters(model, j)
+        nominal["limit_stop"] = limit_side(model, rec)[j][1]
         for eff in effects[j]:
             for p in _EFFECT_PARAMS[eff]:
                 phi_layout.append((j, p))
@@ -228,11 +245,13 @@ def build_joint_space_fit(
             nominal = np.array([1.0])
         else:
             joint, field = name.rsplit(".", 1)
-            nominal = np.array([nominal_force_parameters(model, joint)[field]])
+            value = limit_side(model, rec)[joint][1] if field == "limit_stop" else nominal_force_parameters(model, joint)[field]
+            nominal = np.array([value])
         blocks.append(make_block(model, name, nominal, scales))
     blocks = tuple(blocks)
 
     # --- symbolic interval function (SX) ---------------------------------------------------
+    stop_side = limit_side(model, rec)
     theta = ca.SX.sym("theta", dyn.theta0.size)
     phi = ca.SX.sym("phi", len(phi_layout))
     eps = friction_smoothing(rec) if friction_eps is None else np.broadcast_to(np.asarray(friction_eps, float), (n,))
@@ -244,7 +263,8 @@ def build_joint_space_fit(
             for eff in effects[j]:
                 ps = _EFFECT_PARAMS[eff]
                 args = [phi[k + i] for i in range(len(ps))]
-                tau[ji] = tau[ji] + EFFECTS[eff].force(q[ji], v[ji], *args, eps=float(eps[ji]))
+                extra = {"side": stop_side[j][0]} if eff == "limit_contact" else {}
+                tau[ji] = tau[ji] + EFFECTS[eff].force(q[ji], v[ji], *args, eps=float(eps[ji]), **extra)
                 k += len(ps)
         return ca.vertcat(*tau)
 

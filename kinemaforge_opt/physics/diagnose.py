@@ -6,8 +6,7 @@
 2. explains it by forward selection over the effect library: each candidate effect (on each joint)
    is added to the current model and re-fitted by the joint-space NLP with its physical sign
    bounds; its evidence is ΔBIC = BIC(with) - BIC(without), BIC = N ln(RSS/N) + k ln N on the
-   noise-normalised output error, N the effective number of independent residuals (see
-   :func:`delta_bic`).  The best candidate is accepted while ΔBIC < ``DELTA_BIC``
+   noise-normalised output error.  The best candidate is accepted while ΔBIC < ``DELTA_BIC``
    (−10: "very strong" evidence on the Kass–Raftery scale) and it moves the fitted trajectory by
    at least one noise sigma RMS; an effect whose parameter is pinned at its physical bound
    explains nothing and is never reported;
@@ -28,7 +27,6 @@ from ..errors import DataError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..nlp.joint_space import noise_std
-from ..nlp.sensitivity import lag1_autocorrelation
 from .locate import JointMismatch, locate
 
 DELTA_BIC = -10.0
@@ -46,6 +44,7 @@ CANDIDATES: dict[str, tuple[str, ...]] = {
     "stribeck_friction": ("stribeck", "v_stribeck"),
     "axis_tilt": ("axis",),
     "inertia_error": ("inertia_ratio",),
+    "limit_contact": ("limit_stop", "limit_stiffness"),
 }
 
 
@@ -123,22 +122,25 @@ def _rss(cal: Calibration, sigma_q: np.ndarray) -> tuple[float, np.ndarray]:
 
 
 def delta_bic(richer: Calibration, simpler: Calibration, extra_params: int, sigma_q: np.ndarray) -> float:
-    """BIC(richer) - BIC(simpler) with BIC = N ln(RSS/N) + k ln N, where N is the effective
-    number of independent residuals N (1 - rho)/(1 + rho), rho the lag-1 autocorrelation of the
-    richer model's residuals: systematic model-form error (correlated residuals) must not count
-    as thousands of independent confirmations."""
+    """BIC(richer) - BIC(simpler), BIC = N ln(RSS/N) + k ln N on the noise-normalised output
+    error (N residuals).  Model-form error that BIC would reward is screened out separately by
+    the effect-size rule (MIN_EFFECT_SIZE_SIGMA)."""
     rss1, err = _rss(richer, sigma_q)
     rss0, _ = _rss(simpler, sigma_q)
-    rho = lag1_autocorrelation(err.T)
-    n_eff = max(err.size * (1 - rho) / (1 + rho), 2.0)
-    return float(n_eff * np.log(rss1 / rss0) + extra_params * np.log(n_eff))
+    n = err.size
+    return float(n * np.log(rss1 / rss0) + extra_params * np.log(n))
 
 
 def _free_for(model: ArticulatedModel, joint: str, effect: str) -> list[str]:
-    params = CANDIDATES[effect]
+    """The parameter names freed to test ``effect`` on ``joint``."""
     if effect == "inertia_error":
         return [f"{model.joint(joint).child}.inertia_ratio"]
-    return [f"{joint}.{p}" for p in params]
+    return [f"{joint}.{p}" for p in CANDIDATES[effect]]
+
+
+def _reaches_limit(mismatch: tuple[JointMismatch, ...], joint: str) -> bool:
+    """Only joints whose recording comes near a stop are tested for limit contact."""
+    return any(m.joint == joint and "near limit" in m.regions for m in mismatch)
 
 
 def _n_params(names: list[str]) -> int:
@@ -195,6 +197,8 @@ def diagnose(
             for effect in candidates:
                 if any(s[:2] == (joint, effect) for s in selected):
                     continue
+                if effect == "limit_contact" and not _reaches_limit(mismatch, joint):
+                    continue
                 names = _free_for(model, joint, effect)
                 eff = dict(effects)
                 if effect in ("axis_tilt", "inertia_error"):
@@ -225,6 +229,8 @@ def diagnose(
         params = {}
         if effect == "spring":
             params["rest"] = float(final.estimates[names[1]].value[0])
+        if effect == "limit_contact":
+            params["stiffness"] = float(final.estimates[names[1]].value[0])
         if effect == "stribeck_friction":
             params["v_stribeck"] = float(final.estimates[names[1]].value[0])
         if effect == "axis_tilt":
