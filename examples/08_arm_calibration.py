@@ -6,9 +6,10 @@ independently authored Franka Kitchen Panda of gymnasium-robotics.
 
 Steps: design a Fourier excitation (cond of the regressor) -> drive each real arm along it with
 PD + feedforward, recording q, v and the applied torque at 1 kHz with sensor noise -> identify
-(IDIM-LS now; kinemaforge_opt.calibrate where marked) -> held-out torque prediction on the last
+(IDIM-LS and kinemaforge_opt.calibrate(method="inverse_dynamics"), embedded with
+arm.embedding.embed) -> held-out torque prediction on the last
 quarter of the excitation and on a second trajectory -> computed-torque tracking of the second
-trajectory with each model.  Prints tables, writes recordings and a PNG.  Headless.
+trajectory with each model.  Prints tables, writes recordings and two PNGs.  Headless.
 
     PYTHONPATH=. .venv/bin/python examples/08_arm_calibration.py [-o OUT] [--quick]
 """
@@ -25,7 +26,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from kinemaforge_opt.calibration import calibrate  # noqa: E402
 from kinemaforge_opt.arm.control import inverse_dynamics, track  # noqa: E402
+from kinemaforge_opt.arm.embedding import embed  # noqa: E402
 from kinemaforge_opt.arm.excitation import (  # noqa: E402
     design_excitation,
     excitation_plan,
@@ -71,6 +74,7 @@ def main() -> None:
     t_split = plan.t[-1] * 0.75
 
     fig, axes = plt.subplots(2, 2, figsize=(12, 7))
+    tfig, tax = plt.subplots(2, 2, figsize=(12, 7))
     for row, arm in enumerate((arm_a, arm_b)):
         rec = record_plan(arm, plan, KP, KD, SensorNoise(), seed=1)
         rec_test = record_plan(arm, test_plan, KP, KD, SensorNoise(), seed=2)
@@ -82,37 +86,49 @@ def main() -> None:
         idim = fit_idim_ls(nominal, fit_rec)
         t_idim = time.perf_counter() - t0
         models = {"nominal": inverse_dynamics(nominal), "IDIM-LS": idim.inverse_dynamics()}
-        # ---- PLUG IN kinemaforge_opt.calibrate HERE -------------------------------------------
-        # result = calibrate(nominal, fit_rec)          # joint-space NLP (lead engineer)
-        # models["kinemaforge_opt"] = inverse_dynamics(result.model)   # or result's ID callable
-        # ----------------------------------------------------------------------------------------
+        t0 = time.perf_counter()
+        cal = calibrate(nominal, fit_rec, method="inverse_dynamics", max_iter=1000)
+        t_cal = time.perf_counter() - t0
+        models["kinemaforge_opt"] = embed(cal).inverse_dynamics
 
-        print(f"\n== real arm {arm.name}: IDIM-LS {t_idim:.2f} s, {idim.base.size} base parameters, "
-              f"fit on {fit_rec.t[-1]:.1f} s")
-        print("   identified viscous [N·m·s/rad]:", np.round(idim.viscous, 3))
-        print("   identified Coulomb [N·m]:      ", np.round(idim.coulomb, 3))
+        print(f"\n== real arm {arm.name}: fit on {fit_rec.t[-1]:.1f} s at {1 / fit_rec.dt:.0f} Hz")
+        print(f"   IDIM-LS {t_idim:.2f} s, {idim.base.size} base parameters; kinemaforge_opt {t_cal:.2f} s, "
+              f"{cal.status}, {cal.iterations} IPOPT iterations; {cal.identifiability[0]}")
+        consistent = all(cal.model.link(n[: -len(".inertia")]).inertial.is_physically_consistent()
+                         for n in cal.estimates if n.endswith(".inertia"))
+        print(f"   identified inertias physically consistent: {consistent}")
+        joints = nominal.joint_names
+        for label, idim_x, field in (("viscous [N·m·s/rad]", idim.viscous, "damping"), ("Coulomb [N·m]", idim.coulomb, "coulomb")):
+            ours = np.array([cal.estimates[f"{j}.{field}"].value[0] for j in joints])
+            print(f"   {label:<20} IDIM-LS {np.round(idim_x, 3)}\n   {'':<20} kf_opt  {np.round(ours, 3)}")
         held = {"excitation last 25%": rec.window(t_split, rec.t[-1]), "second trajectory": rec_test}
-        header = "   held-out torque RMS [N·m]     " + " ".join(f"{j[-6:]:>7}" for j in nominal.joint_names) + "    mean"
+        header = "   held-out torque RMS [N·m]           " + " ".join(f"{j[-6:]:>7}" for j in nominal.joint_names) + "    mean"
         print(header)
-        for hname, h in held.items():
-            for mname, id_fn in models.items():
+        for col, (hname, h) in enumerate(held.items()):
+            for k, (mname, id_fn) in enumerate(models.items()):
                 r = held_out_rms(batched(id_fn), h)
-                print(f"   {hname:<19} {mname:<9} " + " ".join(f"{x:7.3f}" for x in r) + f" {r.mean():7.3f}")
+                print(f"   {hname:<19} {mname:<15} " + " ".join(f"{x:7.3f}" for x in r) + f" {r.mean():7.3f}")
+                tax[row, col].bar(np.arange(nominal.nq) + 0.27 * k, r, width=0.27, label=mname)
+            tax[row, col].set(title=f"{arm.name}: held-out torque RMS, {hname}", xlabel="joint", ylabel="[N·m]", yscale="log")
+            tax[row, col].set_xticks(np.arange(nominal.nq) + 0.27, [str(i + 1) for i in range(nominal.nq)])
+            tax[row, col].legend()
         print("   computed-torque tracking RMS [mrad] on the second trajectory")
         for mname, id_fn in models.items():
             res = track(arm, test_plan.t, q_d, v_d, a_d, id_fn, CT_KP, CT_KD, SensorNoise(), seed=3)
             r = 1e3 * res.rms
-            print(f"   {mname:<29} " + " ".join(f"{x:7.2f}" for x in r) + f" {r.mean():7.2f}")
+            print(f"   {mname:<35} " + " ".join(f"{x:7.2f}" for x in r) + f" {r.mean():7.2f}")
             axes[row, 0].semilogy(res.t, 1e3 * np.linalg.norm(res.error, axis=1), label=mname)
-            axes[row, 1].bar(np.arange(nominal.nq) + 0.4 * list(models).index(mname), r, width=0.4, label=mname)
+            axes[row, 1].bar(np.arange(nominal.nq) + 0.27 * list(models).index(mname), r, width=0.27, label=mname)
         axes[row, 0].set(title=f"{arm.name}: |q - q_des|", xlabel="t [s]", ylabel="[mrad]")
         axes[row, 1].set(title=f"{arm.name}: RMS per joint", xlabel="joint", ylabel="[mrad]", yscale="log")
-        axes[row, 1].set_xticks(np.arange(nominal.nq) + 0.2, [str(i + 1) for i in range(nominal.nq)])
+        axes[row, 1].set_xticks(np.arange(nominal.nq) + 0.27, [str(i + 1) for i in range(nominal.nq)])
         for ax in axes[row]:
             ax.legend()
     fig.tight_layout()
     fig.savefig(out / "tracking_error.png", dpi=100)
-    print(f"\nwrote {out / 'tracking_error.png'} and recordings in {out}")
+    tfig.tight_layout()
+    tfig.savefig(out / "heldout_torque.png", dpi=100)
+    print(f"\nwrote {out / 'tracking_error.png'}, {out / 'heldout_torque.png'} and recordings in {out}")
 
 
 if __name__ == "__main__":
