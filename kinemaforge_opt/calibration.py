@@ -144,7 +144,8 @@ def calibrate(
     if method == "inverse_dynamics":
         from .nlp.inverse_dynamics import calibrate_inverse_dynamics
 
-        return calibrate_inverse_dynamics(model, recording, free=free, effects=effects, max_iter=max_iter)
+        # Near-unidentifiable directions make IPOPT crawl: allow it more iterations.
+        return calibrate_inverse_dynamics(model, recording, free=free, effects=effects, max_iter=max(max_iter, 1000))
     if method != "collocation":
         raise KinemaforgeError(f"method must be 'collocation' or 'inverse_dynamics', got {method!r}")
     if free is None:
