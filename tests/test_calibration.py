@@ -83,5 +83,11 @@ def test_bad_input_names_the_culprit(door_case):
     with pytest.raises(DataError, match="no motion"):
         calibrate(model, still)
     other = Recording(rec.t, ("elbow",), rec.q)
-    with pytest.raises(DataError, match=rf"no q column for joint\(s\) \['{j}'\]"):
+    with pytest.raises(UnknownNameError, match=r"joint \(recorded\) 'elbow' does not exist; available: "):
         calibrate(model, other)
+    from kinemaforge_opt.model import read_urdf
+
+    cabinet = read_urdf("models/cabinet/cabinet.urdf")
+    door_only = Recording(rec.t, ("door_hinge",), rec.q)
+    with pytest.raises(DataError, match=r"no q column for joint\(s\) \['drawer_slide'\]"):
+        calibrate(cabinet, door_only)

@@ -56,6 +56,21 @@ _EFFECT_PARAMS = {
 }
 
 
+def match_recording(model: ArticulatedModel, recording: Recording) -> Recording:
+    """``recording`` restricted and ordered to the model's joints.  Raises :class:`DataError` /
+    :class:`UnknownNameError` naming the joints when the two disagree, or when nothing moves."""
+    extra = [j for j in recording.joint_names if j not in model.joint_names]
+    if extra:
+        raise UnknownNameError("joint (recorded)", extra[0], model.joint_names)
+    missing = [j for j in model.joint_names if j not in recording.joint_names]
+    if missing:
+        raise DataError(f"recording has no q column for joint(s) {missing} of model {model.name!r}")
+    rec = recording.select(model.joint_names)
+    if np.all(np.ptp(rec.q, axis=0) < 1e-9):
+        raise DataError("recording shows no motion: every joint stays at its initial position")
+    return rec
+
+
 def noise_std(x: np.ndarray) -> np.ndarray:
     """Per-column noise level of a sampled signal (T, n) from its third differences (robust MAD;
     white noise of std s gives third differences of std s·sqrt(20)).  Floored at 1e-9."""
@@ -194,15 +209,7 @@ def build_joint_space_fit(
     """
     if energy not in ("soft", "hard", "off"):
         raise KinemaforgeError(f"energy must be 'soft', 'hard' or 'off', got {energy!r}")
-    missing = [j for j in model.joint_names if j not in recording.joint_names]
-    if missing:
-        raise DataError(f"recording has no q column for joint(s) {missing} of model {model.name!r}")
-    extra = [j for j in recording.joint_names if j not in model.joint_names]
-    if extra:
-        raise UnknownNameError("joint (recorded)", extra[0], model.joint_names)
-    rec = recording.select(model.joint_names)
-    if np.all(np.ptp(rec.q, axis=0) < 1e-9):
-        raise DataError("recording shows no motion: every joint stays at its initial position")
+    rec = match_recording(model, recording)
 
     bridge_names = set(available_parameters(model))
     ratio_names = {f"{l}.inertia_ratio" for l in model.link_names[1:]}

@@ -26,7 +26,7 @@ from ..calibration import Calibration, calibrate
 from ..errors import DataError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
-from ..nlp.joint_space import noise_std
+from ..nlp.joint_space import match_recording, noise_std
 from .locate import JointMismatch, locate
 
 DELTA_BIC = -10.0
@@ -171,7 +171,7 @@ def diagnose(
     progress: optional callable(str) receiving one line per stage.
     """
     say = progress or (lambda s: None)
-    rec = recording.select(model.joint_names)
+    rec = match_recording(model, recording)
     unknown = [c for c in candidates if c not in CANDIDATES]
     if unknown:
         raise DataError(f"unknown candidate effect(s) {unknown}; available: {', '.join(CANDIDATES)}")

@@ -1,0 +1,51 @@
+"""Bad recordings exit 2 with a message that names the file, column and row at fault."""
+
+from __future__ import annotations
+
+import pytest
+
+from kinemaforge_opt.cli import main as cli_main
+from kinemaforge_opt.errors import InputFileError
+from kinemaforge_opt.io.recording import Recording, read_recording, write_recording
+
+LAPTOP = "models/laptop/laptop.urdf"
+
+GOOD = "t,q:hinge,tau:hinge\n" + "".join(f"{0.01 * i},{0.001 * i * i},0.1\n" for i in range(50))
+
+BAD = {
+    "unknown_joint": ("t,q:elbow\n0,0\n0.1,0.1\n0.2,0.2\n", None, r"joint \(recorded\) 'elbow' does not exist"),
+    "non_monotonic": ("t,q:hinge\n0,0\n0.2,0.1\n0.1,0.2\n", "strictly increasing", None),
+    "duplicate_time": ("t,q:hinge\n0,0\n0.1,0.1\n0.1,0.2\n", "strictly increasing", None),
+    "nan": ("t,q:hinge\n0,0\n0.1,nan\n0.2,0.2\n", r"q:hinge is not finite at row 1 \(t=0\.1 s\)", None),
+    "bad_header": ("time,q:hinge\n0,0\n0.1,0\n", r"first column must be 't'", None),
+    "bad_column": ("t,x:hinge\n0,0\n0.1,0\n", r"column 1 'x:hinge' is not one of", None),
+    "orphan_tau": ("t,q:hinge,tau:door\n0,0,0\n0.1,0,0\n", r"tau:door has no matching q:door", None),
+    "too_short": ("t,q:hinge\n0,0\n0.1,0.1\n0.2,0.2\n0.3,0.3\n", None, "too few"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_recordings_exit_2_with_a_named_message(case, tmp_path, capsys):
+    text, read_error, cli_error = BAD[case]
+    path = tmp_path / f"{case}.csv"
+    path.write_text(text)
+    if read_error:
+        with pytest.raises(InputFileError, match=read_error) as info:
+            read_recording(path)
+        assert f"{case}.csv" in str(info.value)
+    code = cli_main(["diagnose", LAPTOP, str(path), "-o", str(tmp_path / "out"), "--no-drift"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("kinemaforge diagnose: error:")
+    assert case + ".csv" in err or cli_error and __import__("re").search(cli_error, err), err
+    assert not (tmp_path / "out" / "model.urdf").exists()
+
+
+def test_round_trip(tmp_path):
+    path = tmp_path / "rec.csv"
+    path.write_text(GOOD)
+    rec = read_recording(path)
+    write_recording(tmp_path / "again.csv", rec)
+    again = read_recording(tmp_path / "again.csv")
+    assert again.joint_names == ("hinge",) and (again.q == rec.q).all() and (again.tau == rec.tau).all()
+    assert isinstance(rec, Recording) and rec.v is None
