@@ -15,24 +15,26 @@ from .stages import calibrate_scaling, demo_door, sturm_logs
 
 @dataclass(frozen=True)
 class Size:
-    """What one benchmark size runs: discovery cases × encoder-noise seeds, demo-door seeds, the
-    recording rates of the calibrate-scaling sweep."""
+    """What one benchmark size runs: discovery cases (with or without the effect pairs) ×
+    encoder-noise seeds, demo-door seeds, the recording rates of the calibrate-scaling sweep."""
 
     name: str
+    pairs: bool
     noise_seeds: tuple[int, ...]
     demo_seeds: tuple[int, ...]
     rates_hz: tuple[int, ...]
 
 
-QUICK = Size("quick", (0,), (0,), (30, 60, 120))
-FULL = Size("full", (0, 1, 2), (0, 1, 2), (30, 60, 120, 240, 400))
+QUICK = Size("quick", False, (0,), (0,), (30, 60, 120))
+FULL = Size("full", True, (0, 1, 2), (0, 1, 2), (30, 60, 120, 240, 400))
 
 
-def discovery_cases() -> list[str]:
-    """The concealed-effects set: ``effect_*`` and ``null_*`` catalogue cases."""
+def discovery_cases(pairs: bool = True) -> list[str]:
+    """The concealed-effects set: ``effect_*`` and ``null_*`` catalogue cases (the pairs
+    ``effect_<kind>_<a>+<b>`` only with ``pairs``: each costs several single cases)."""
     from problems.catalogue import CASES
 
-    return [n for n in CASES if n.startswith(("effect_", "null_"))]
+    return [n for n in CASES if n.startswith(("effect_", "null_")) and (pairs or "+" not in n)]
 
 
 def machine() -> str:
@@ -45,7 +47,7 @@ def run_bench(size: Size, cases: list[str] | None = None, progress=None) -> dict
     t_start = time.perf_counter()
     scores = []
     for seed in size.noise_seeds:
-        for case in cases or discovery_cases():
+        for case in cases or discovery_cases(size.pairs):
             say(f"discovery {case} (noise seed {seed})")
             scores += run_case(case, seed)
     say("real Sturm logs")

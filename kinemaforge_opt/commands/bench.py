@@ -6,11 +6,10 @@ import argparse
 
 EPILOG = """\
 sizes:
-  --quick   every concealed-effect and null case with one noise seed, one demo-door seed,
-            calibrate scaling at 30/60/120 Hz: under 10 minutes on 2 cores
-  (full)    three noise seeds, three demo-door seeds, scaling up to 400 Hz: about three times
-            the quick discovery time plus the 240/400 Hz calibrations (calibrate time grows
-            about as samples^2); its runtime is written to bench.json ("total_s")
+  --quick   each concealed effect alone on the door and the drawer plus the null cases, one
+            noise seed, one demo-door seed, calibrate scaling at 30/60/120 Hz
+  (full)    adds the effect pairs, three noise seeds, three demo-door seeds, scaling up to
+            400 Hz; each run writes its runtime to bench.json ("total_s")
 
 outputs: DIR/bench.json, DIR/bench.md, DIR/scaling.png, DIR/discovery.png
 """
