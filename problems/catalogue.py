@@ -9,6 +9,8 @@ Groups (the name prefix says which):
   (``door``) and on a drawer (``drawer``), a few pairs, and null cases (``null_…``).  Two
   views at 320×240: these cases are mainly for the joint-space entry (recording.csv + model.urdf).
 * ``tiny_…`` — small cases for tests (64×48 px, 2 views, few frames).
+* ``timing_episode`` — the generation-speed figure: a 10-s episode rendered at 30 Hz from 4
+  views at 640×480 (``python -m problems.time_synth`` times it).
 
 Seeds are fixed, so every case reproduces bit-for-bit on one machine.
 """
@@ -18,6 +20,7 @@ from __future__ import annotations
 from kinemaforge_opt.errors import UnknownNameError
 from kinemaforge_opt.synth.case import Case
 from kinemaforge_opt.synth.effects import ConcealedEffect as E
+from kinemaforge_opt.synth.groundtruth import HandPlan
 from kinemaforge_opt.synth.sensor import CLEAN
 
 PROTOCOL_CATEGORIES = ("cabinet", "drawer", "laptop", "refrigerator", "microwave")
@@ -115,7 +118,14 @@ def _tiny_cases() -> dict[str, Case]:
     }
 
 
-CASES: dict[str, Case] = {**_protocol_cases(), **_effect_cases(), **_tiny_cases()}
+def _timing_cases() -> dict[str, Case]:
+    # two doors, one 5-s stroke each: 10 s, 300 rendered time steps
+    plan = HandPlan(goals=(0.6,), push_s=1.0, free_s=4.0)
+    return {"timing_episode": Case("timing_episode", "cabinet", 100, views=4, frames=300, record_hz=30, plan=plan,
+                                   expected=_KINEMATICS)}
+
+
+CASES: dict[str, Case] = {**_protocol_cases(), **_effect_cases(), **_tiny_cases(), **_timing_cases()}
 
 
 def get_case(name: str) -> Case:

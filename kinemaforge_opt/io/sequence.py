@@ -269,8 +269,8 @@ def frame_paths(camera: str, index: int) -> tuple[str, str]:
 def write_png(path: str | os.PathLike, image: np.ndarray) -> Path:
     """Write an 8- or 16-bit image as PNG atomically (3-channel images are given as RGB)."""
     path = Path(path)
-    img = image[..., ::-1] if image.ndim == 3 else image
-    ok, buf = cv2.imencode(".png", np.ascontiguousarray(img))
+    img = np.ascontiguousarray(image)
+    ok, buf = cv2.imencode(".png", cv2.cvtColor(img, cv2.COLOR_RGB2BGR) if img.ndim == 3 else img)
     if not ok:
         raise OSError(f"could not encode {path} as PNG")
     with atomic_path(path) as tmp:

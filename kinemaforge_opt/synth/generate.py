@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -112,8 +114,28 @@ def _tracks(ep: Episode, idx: np.ndarray) -> PoseTracks:
                       np.swapaxes(Ts[:, :, :3, :3], 0, 1))
 
 
-def generate_case(case: Case, out_dir: str | Path) -> CasePaths:
-    """Generate ``case`` into ``out_dir`` (see the module docstring for the layout)."""
+def fixed_links(episode: Episode) -> dict[str, np.ndarray]:
+    """The links whose pose never changes over ``episode`` -> that (4, 4) T_world_link."""
+    Ts = episode.Ts_world_link  # (T, L, 4, 4)
+    return {n: Ts[0, j] for j, n in enumerate(episode.link_names) if np.all(Ts[:, j] == Ts[0, j])}
+
+
+def write_view(renderer: SceneRenderer, intr: Intrinsics, frame: Frame, Ts_world_link: np.ndarray,
+               case: Case, seq: Path, gt: Path) -> None:
+    """Render one view with the links at ``Ts_world_link`` (L, 4, 4), apply the sensor model and
+    write the frame's RGB and depth PNGs under ``seq`` and its label PNG under ``gt``.  Each frame
+    draws its noise from its own stream (seeded by the case seed and frame index), so views can
+    be written in parallel and in any order with the same result."""
+    rng = np.random.default_rng([case.seed, 7, frame.index])
+    view = renderer.render(Ts_world_link, intr, frame.T_world_camera)
+    write_png(seq / frame.rgb, noisy_rgb(view.rgb, case.noise, rng))
+    write_png(seq / frame.depth, depth_to_png(noisy_depth(view.depth, view.cos_incidence, case.noise, rng), DEPTH_SCALE))
+    write_png(gt / "labels" / frame.camera / f"{frame.index:06d}.png", view.labels)
+
+
+def generate_case(case: Case, out_dir: str | Path, workers: int | None = None) -> CasePaths:
+    """Generate ``case`` into ``out_dir`` (see the module docstring for the layout).  Views are
+    rendered and written by ``workers`` threads (default: one per available core)."""
     root = Path(out_dir)
     seq = root / "sequence"
     gt = root / "ground_truth"
@@ -125,18 +147,24 @@ def generate_case(case: Case, out_dir: str | Path) -> CasePaths:
     intr = Intrinsics.from_hfov(case.width, case.height, case.hfov_deg)
     cams = camera_poses(obj, case, times)
     renderer = SceneRenderer(obj.meshes, obj.colors, obj.model.link_names,
-                             wall_y=float(obj.meshes[obj.model.root.name].bounds[1][1]) + 0.3)
-    rng = np.random.default_rng([case.seed, 7])
+                             wall_y=float(obj.meshes[obj.model.root.name].bounds[1][1]) + 0.3,
+                             fixed_links=fixed_links(episode))
     frames: list[Frame] = []
+    views = []
     for k, (i, t) in enumerate(zip(idx, times)):
         for name, Ts_world_camera in cams:
-            index = len(frames)
-            view = renderer.render(episode.Ts_world_link[i], intr, Ts_world_camera[k])
-            rgb_path, depth_path = frame_paths(name, index)
-            write_png(seq / rgb_path, noisy_rgb(view.rgb, case.noise, rng))
-            write_png(seq / depth_path, depth_to_png(noisy_depth(view.depth, view.cos_incidence, case.noise, rng), DEPTH_SCALE))
-            write_png(gt / "labels" / name / f"{index:06d}.png", view.labels)
-            frames.append(Frame(index, float(t), name, Ts_world_camera[k], rgb_path, depth_path))
+            rgb_path, depth_path = frame_paths(name, len(frames))
+            frames.append(Frame(len(frames), float(t), name, Ts_world_camera[k], rgb_path, depth_path))
+            views.append(episode.Ts_world_link[i])
+    with ThreadPoolExecutor(max_workers=workers or len(os.sched_getaffinity(0))) as pool:
+        jobs = [pool.submit(write_view, renderer, intr, f, Ts, case, seq, gt) for f, Ts in zip(frames, views)]
+        try:
+            for job in jobs:
+                job.result()
+        except BaseException:
+            for job in jobs:
+                job.cancel()
+            raise
     cameras = {name: CameraInfo(name, intr.width, intr.height, intr.fx, intr.fy, intr.cx, intr.cy) for name, _ in cams}
     write_sequence_json(seq, cameras, frames, DEPTH_SCALE, obj.model.gravity)
     write_wrenches(seq / "wrenches.csv", Wrenches(episode.t, episode.grip_world, episode.force_world))

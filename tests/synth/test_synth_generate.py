@@ -126,3 +126,12 @@ def test_command_lists_generates_and_rejects_unknown_cases(tmp_path, capsys):
     assert (tmp_path / "d" / "sequence" / "sequence.json").is_file()
     assert main(["synth", "no_such_case", "-o", str(tmp_path / "x")]) == 2
     assert "benchmark case 'no_such_case' does not exist" in capsys.readouterr().err
+
+
+def test_images_do_not_depend_on_the_number_of_workers(tmp_path):
+    one = generate_case(CASES["tiny_door"], tmp_path / "one", workers=1)
+    two = generate_case(CASES["tiny_door"], tmp_path / "two", workers=2)
+    files = sorted(p.relative_to(one.root) for p in one.root.rglob("*.png"))
+    assert files and files == sorted(p.relative_to(two.root) for p in two.root.rglob("*.png"))
+    for f in files:
+        assert (one.root / f).read_bytes() == (two.root / f).read_bytes(), f

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from kinemaforge_opt.errors import ModelError
 from kinemaforge_opt.spatial import inverse
 from kinemaforge_opt.synth.render import LABEL_ENVIRONMENT, LABEL_FIRST_LINK, Intrinsics, SceneRenderer, look_at
 from kinemaforge_opt.synth.sensor import CLEAN, D435, noisy_depth, noisy_rgb
@@ -100,3 +101,25 @@ def test_rgb_noise_level():
     out = noisy_rgb(np.full((100, 100, 3), 0.5), D435, rng)
     assert out.dtype == np.uint8
     assert np.std(out / 255.0) == pytest.approx(D435.rgb_sigma, rel=0.15)
+
+
+def test_fixed_links_cast_once_give_the_same_image_as_the_whole_scene():
+    """The cached static layer plus the moving links' footprint equals one cast of everything,
+    also when a moving link is partly out of view or reaches behind the camera."""
+    base = trimesh.creation.box(extents=[0.6, 0.4, 0.8])
+    door = trimesh.creation.box(extents=[0.5, 0.02, 0.7])
+    meshes, colors = {"base": base, "door": door}, {"base": (0.5, 0.5, 0.5), "door": (0.2, 0.6, 0.3)}
+    T_base = np.eye(4)
+    T_base[:3, 3] = [0.0, 0.0, 0.4]
+    whole = SceneRenderer(meshes, colors, ("base", "door"), wall_y=1.0)
+    split = SceneRenderer(meshes, colors, ("base", "door"), wall_y=1.0, fixed_links={"base": T_base})
+    T_world_camera = look_at([0.5, -2.0, 1.2], [0.0, 0.0, 0.4])
+    for door_xyz in ([0.1, -0.3, 0.4], [0.9, -0.5, 0.6], [0.5, -2.0, 1.2]):  # in view, at the edge, around the camera
+        T_door = np.eye(4)
+        T_door[:3, 3] = door_xyz
+        a = whole.render(np.stack([T_base, T_door]), INTR, T_world_camera)
+        b = split.render(np.stack([T_base, T_door]), INTR, T_world_camera)
+        for field in ("depth", "labels", "rgb", "cos_incidence"):
+            np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    with pytest.raises(ModelError, match="fixed"):
+        split.render(np.stack([np.eye(4), T_door]), INTR, T_world_camera)
