@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from kinemaforge_opt.io.sequence import depth_to_png, load_sequence, write_png
-from kinemaforge_opt.synth.generate import DEPTH_SCALE, fixed_links, generate_case
+from kinemaforge_opt.synth.generate import DEPTH_SCALE, generate_case, scene_renderer
 from kinemaforge_opt.synth.groundtruth import simulate
 from kinemaforge_opt.synth.objects import make_object
-from kinemaforge_opt.synth.render import Intrinsics, SceneRenderer
+from kinemaforge_opt.synth.render import Intrinsics
 from kinemaforge_opt.synth.sensor import noisy_depth, noisy_rgb
 from problems.catalogue import get_case
 
@@ -32,22 +32,24 @@ def folder_mb(path: Path) -> float:
 
 
 def stage_breakdown(case, out: Path, sample: int) -> dict[str, float]:
-    """Mean single-thread time per view [ms] of each stage, over ``sample`` views of the sequence
-    generated in ``out`` (same renderer, cameras and link poses as ``generate_case``)."""
+    """Mean single-thread time per view [ms] of each stage, over ``sample`` views spread over the
+    sequence generated in ``out`` (same renderer, cameras and link poses as ``generate_case``)."""
     obj = make_object(case.category, case.seed)
     episode = simulate(obj.model, obj.handles, case.effects, case.plan, case.record_hz)
     seq = load_sequence(out / "sequence")
-    renderer = SceneRenderer(obj.meshes, obj.colors, obj.model.link_names,
-                             wall_y=float(obj.meshes[obj.model.root.name].bounds[1][1]) + 0.3,
-                             fixed_links=fixed_links(episode))
+    renderer = scene_renderer(obj, episode)
     times = {"render (ray cast + shading)": 0.0, "sensor model (RGB + depth)": 0.0, "PNG encode + write (3 images)": 0.0}
     rng = np.random.default_rng(0)
-    frames = seq.frames[:: max(1, len(seq.frames) // sample)]
+    picks = np.unique(np.linspace(0, len(seq.frames) - 1, sample).round().astype(int))
+    jobs = []
+    for f in (seq.frames[i] for i in picks):
+        cam = seq.cameras[f.camera]
+        intr = Intrinsics(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
+        jobs.append((f, intr, episode.Ts_world_link[int(np.argmin(np.abs(episode.t - f.t)))]))
+    for f, intr, Ts in jobs:  # the static scene is cast once per camera: not part of the per-view cost
+        renderer.render(Ts, intr, f.T_world_camera)
     with tempfile.TemporaryDirectory() as tmp:
-        for f in frames:
-            cam = seq.cameras[f.camera]
-            intr = Intrinsics(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
-            Ts = episode.Ts_world_link[int(np.argmin(np.abs(episode.t - f.t)))]
+        for f, intr, Ts in jobs:
             t0 = time.perf_counter()
             view = renderer.render(Ts, intr, f.T_world_camera)
             t1 = time.perf_counter()
@@ -58,7 +60,7 @@ def stage_breakdown(case, out: Path, sample: int) -> dict[str, float]:
                 write_png(Path(tmp) / f"{name}.png", img)
             t3 = time.perf_counter()
             for key, dt in zip(times, (t1 - t0, t2 - t1, t3 - t2)):
-                times[key] += dt * 1e3 / len(frames)
+                times[key] += dt * 1e3 / len(jobs)
     return times
 
 

@@ -114,14 +114,17 @@ def _tracks(ep: Episode, idx: np.ndarray) -> PoseTracks:
                       np.swapaxes(Ts[:, :, :3, :3], 0, 1))
 
 
-def fixed_links(episode: Episode) -> dict[str, np.ndarray]:
-    """The links whose pose never changes over ``episode`` -> that (4, 4) T_world_link."""
+def scene_renderer(obj: SynthObject, episode: Episode) -> SceneRenderer:
+    """The renderer of a case: the object's links, the floor, a back wall 30 cm behind the root
+    link, and the links that never move in ``episode`` declared fixed (cast once per camera)."""
     Ts = episode.Ts_world_link  # (T, L, 4, 4)
-    return {n: Ts[0, j] for j, n in enumerate(episode.link_names) if np.all(Ts[:, j] == Ts[0, j])}
+    fixed = {n: Ts[0, j] for j, n in enumerate(episode.link_names) if np.all(Ts[:, j] == Ts[0, j])}
+    return SceneRenderer(obj.meshes, obj.colors, obj.model.link_names,
+                         wall_y=float(obj.meshes[obj.model.root.name].bounds[1][1]) + 0.3, fixed_links=fixed)
 
 
-def write_view(renderer: SceneRenderer, intr: Intrinsics, frame: Frame, Ts_world_link: np.ndarray,
-               case: Case, seq: Path, gt: Path) -> None:
+def _write_view(renderer: SceneRenderer, intr: Intrinsics, frame: Frame, Ts_world_link: np.ndarray,
+                case: Case, seq: Path, gt: Path) -> None:
     """Render one view with the links at ``Ts_world_link`` (L, 4, 4), apply the sensor model and
     write the frame's RGB and depth PNGs under ``seq`` and its label PNG under ``gt``.  Each frame
     draws its noise from its own stream (seeded by the case seed and frame index), so views can
@@ -131,6 +134,22 @@ def write_view(renderer: SceneRenderer, intr: Intrinsics, frame: Frame, Ts_world
     write_png(seq / frame.rgb, noisy_rgb(view.rgb, case.noise, rng))
     write_png(seq / frame.depth, depth_to_png(noisy_depth(view.depth, view.cos_incidence, case.noise, rng), DEPTH_SCALE))
     write_png(gt / "labels" / frame.camera / f"{frame.index:06d}.png", view.labels)
+
+
+def _write_views(renderer: SceneRenderer, intr: Intrinsics, frames: list[Frame], link_poses: list[np.ndarray],
+                 case: Case, seq: Path, gt: Path, workers: int) -> None:
+    """:func:`_write_view` for every frame (with its (L, 4, 4) link poses) on ``workers`` threads
+    (ray casting, numpy and PNG encoding release the GIL).  The first failure cancels the views
+    not yet started and is raised."""
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        jobs = [pool.submit(_write_view, renderer, intr, f, Ts, case, seq, gt) for f, Ts in zip(frames, link_poses)]
+        try:
+            for job in jobs:
+                job.result()
+        except BaseException:
+            for job in jobs:
+                job.cancel()
+            raise
 
 
 def generate_case(case: Case, out_dir: str | Path, workers: int | None = None) -> CasePaths:
@@ -146,25 +165,15 @@ def generate_case(case: Case, out_dir: str | Path, workers: int | None = None) -
     times = episode.t[idx]
     intr = Intrinsics.from_hfov(case.width, case.height, case.hfov_deg)
     cams = camera_poses(obj, case, times)
-    renderer = SceneRenderer(obj.meshes, obj.colors, obj.model.link_names,
-                             wall_y=float(obj.meshes[obj.model.root.name].bounds[1][1]) + 0.3,
-                             fixed_links=fixed_links(episode))
+    renderer = scene_renderer(obj, episode)
     frames: list[Frame] = []
-    views = []
+    link_poses = []
     for k, (i, t) in enumerate(zip(idx, times)):
         for name, Ts_world_camera in cams:
             rgb_path, depth_path = frame_paths(name, len(frames))
             frames.append(Frame(len(frames), float(t), name, Ts_world_camera[k], rgb_path, depth_path))
-            views.append(episode.Ts_world_link[i])
-    with ThreadPoolExecutor(max_workers=workers or len(os.sched_getaffinity(0))) as pool:
-        jobs = [pool.submit(write_view, renderer, intr, f, Ts, case, seq, gt) for f, Ts in zip(frames, views)]
-        try:
-            for job in jobs:
-                job.result()
-        except BaseException:
-            for job in jobs:
-                job.cancel()
-            raise
+            link_poses.append(episode.Ts_world_link[i])
+    _write_views(renderer, intr, frames, link_poses, case, seq, gt, workers or os.cpu_count() or 1)
     cameras = {name: CameraInfo(name, intr.width, intr.height, intr.fx, intr.fy, intr.cx, intr.cy) for name, _ in cams}
     write_sequence_json(seq, cameras, frames, DEPTH_SCALE, obj.model.gravity)
     write_wrenches(seq / "wrenches.csv", Wrenches(episode.t, episode.grip_world, episode.force_world))
