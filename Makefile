@@ -22,7 +22,7 @@ test-all: $(STAMP)
 	$(PY) -m pytest -q
 
 bench: $(STAMP)
-	$(VENV)/bin/kinemaforge bench
+	$(VENV)/bin/kinemaforge bench -o bench_results
 
 # Installs missing Debian packages only (apt-get update runs only when something is missing).
 sysdeps:

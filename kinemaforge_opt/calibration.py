@@ -130,6 +130,7 @@ def calibrate(
     substeps: int = 1,
     friction_eps: float | None = None,
     method: str = "collocation",
+    segment_s: float | None = None,
 ) -> Calibration:
     """Fit ``free`` parameters of ``model`` to ``recording`` (joint-space NLP, IPOPT).
 
@@ -153,7 +154,7 @@ def calibrate(
     start = time.perf_counter()
     fit = build_joint_space_fit(
         model, recording, tuple(free), effects, energy=energy, energy_weight=energy_weight,
-        substeps=substeps, friction_eps=friction_eps,
+        substeps=substeps, friction_eps=friction_eps, segment_s=segment_s,
     )
     res = fit.problem.solve(max_iter=max_iter, print_level=print_level)
     X = res.values["x"]

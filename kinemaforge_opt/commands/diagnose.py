@@ -35,6 +35,10 @@ def register(sub) -> None:
     p.add_argument("-o", "--out", required=True, help="output folder")
     p.add_argument("--holdout", type=float, default=0.25, help="fraction held out at the end (default 0.25)")
     p.add_argument("--no-drift", action="store_true", help="skip the Drake drift comparison")
+    p.add_argument("--segment", type=float, default=None, metavar="S",
+                   help="fit and predict in segments of S seconds (long oscillating recordings)")
+    p.add_argument("--other", nargs="*", default=(), metavar="CSV",
+                   help="further recordings of the same system, used only to compare predictions")
     p.set_defaults(func=run)
 
 
@@ -61,7 +65,11 @@ def run(args) -> int:
         bar.set_postfix_str(msg)
         bar.update(1)
 
-    d = diagnose(model, rec, holdout_fraction=args.holdout, progress=progress)
+    others = tuple(read_recording(p) for p in args.other)
+    for other in others:
+        match_recording(model, other)
+    d = diagnose(model, rec, holdout_fraction=args.holdout, progress=progress, segment_s=args.segment,
+                 other_recordings=others)
     bar.close()
     paths = write_diagnosis(d, rec, args.out, with_drift=not args.no_drift)
     print(d.summary())

@@ -143,6 +143,7 @@ class JointSpaceFit:
     sigma_q: np.ndarray
     sigma_v: np.ndarray | None
     substeps: int
+    segment_starts: tuple[int, ...]  # grid columns whose state is free (no defect leads into them)
     defect: ca.Function  # (xk, xk1, uk, uk1, h, theta, phi) -> (defect, work, dE)
     theta_names: tuple[str, ...]
     phi_layout: tuple[tuple[str, str], ...]  # (joint, force param) per entry of phi
@@ -194,6 +195,7 @@ def build_joint_space_fit(
     sigma_q: np.ndarray | None = None,
     substeps: int = 1,
     friction_eps: np.ndarray | float | None = None,
+    segment_s: float | None = None,
 ) -> JointSpaceFit:
     """Build the fit of ``free`` parameters to ``recording`` (see the module docstring).
 
@@ -206,6 +208,9 @@ def build_joint_space_fit(
     substeps: collocation intervals per sample interval (>1 resolves fast transients such as
     friction stops between samples).  friction_eps: width of the smooth sign [rad/s or m/s]
     per joint; default :func:`friction_smoothing` of the recording.
+    segment_s: if given, the recording is cut into segments of this length [s], each starting from
+    its own free initial state (no continuity across cuts): output-error fits of long oscillating
+    recordings otherwise get trapped by phase drift (multiple shooting on a coarse grid).
     """
     if energy not in ("soft", "hard", "off"):
         raise KinemaforgeError(f"energy must be 'soft', 'hard' or 'off', got {energy!r}")
@@ -336,7 +341,15 @@ def build_joint_space_fit(
     H = np.diff(t_grid)[None, :]
     mapped = interval.map(G - 1)
     D, Wk, dE = mapped(X[:, :-1], X[:, 1:], U[:, :-1], U[:, 1:], H, theta_mx, phi_mx)
-    prob.add_constraint("dynamics", D)
+    segment_starts = (0,)
+    if segment_s:
+        cuts = np.flatnonzero(np.diff(np.floor((t_grid - t_grid[0]) / segment_s)) > 0)  # interval index at a cut
+        keep = np.setdiff1d(np.arange(G - 1), cuts)
+        segment_starts = (0,) + tuple(int(c) + 1 for c in cuts)
+        prob.add_constraint("dynamics", D[:, keep.tolist()])
+        D = D[:, keep.tolist()]
+    else:
+        prob.add_constraint("dynamics", D)
 
     sq = noise_std(rec.q) if sigma_q is None else np.broadcast_to(np.asarray(sigma_q, float), (n,))
     Rq = (Xs[:n, :] - rec.q.T) / sq[:, None]
@@ -365,7 +378,7 @@ def build_joint_space_fit(
 
     return JointSpaceFit(
         problem=prob, model=model, recording=rec, blocks=blocks, effects=effects, dynamics=dyn,
-        sigma_q=sq, sigma_v=sv, substeps=m, defect=interval, theta_names=theta_names, phi_layout=tuple(phi_layout),
+        sigma_q=sq, sigma_v=sv, substeps=m, segment_starts=segment_starts, defect=interval, theta_names=theta_names, phi_layout=tuple(phi_layout),
         phi_fixed=phi_fixed, phi_free=phi_free,
         defects=ca.Function("defects", [X, z_all], [ca.vec(D)]),
         residuals=ca.Function("residuals", [X], [ca.vertcat(*outputs)]),

@@ -73,12 +73,17 @@ def fit_sensitivity(fit: JointSpaceFit, X: np.ndarray, z: np.ndarray, rel_tol: f
     Rj = ca.Function("residual_jacobian", [Xs], [ca.jacobian(fit.residuals(Xs), Xs)])(X)
     Rj = sp.csr_matrix(Rj.sparse())
 
-    # s = (x0, z); X_rest follows from the defects.
-    A = JX[:, nx:]
-    B = sp.hstack([JX[:, :nx], sp.csc_matrix(Jz)]).toarray()
-    dXrest = -spla.splu(A.tocsc()).solve(B)
-    dX = np.vstack([np.hstack([np.eye(nx), np.zeros((nx, z.size))]), dXrest])  # (nx T, nx + nz)
+    # s = (free states, z): the first state of every segment is free; the rest follow from the defects.
+    free_idx = np.concatenate([np.arange(c * nx, (c + 1) * nx) for c in fit.segment_starts])
+    rest_idx = np.setdiff1d(np.arange(nx * T), free_idx)
+    A = JX[:, rest_idx]
+    B = sp.hstack([JX[:, free_idx], sp.csc_matrix(Jz)]).toarray()
+    n_free = free_idx.size
+    dX = np.zeros((nx * T, n_free + z.size))
+    dX[free_idx, np.arange(n_free)] = 1.0
+    dX[rest_idx] = -spla.splu(A.tocsc()).solve(B)
     J = Rj @ dX
+    nx = n_free  # from here on, "initial state" means all free segment states
 
     # Reduce axis blocks to their tangent plane.
     cols, labels, pieces = [], [], []

@@ -96,6 +96,7 @@ class Diagnosis:
     final_fit: Calibration
     model: ArticulatedModel
     held_out: HeldOut | None
+    held_out_others: tuple[HeldOut, ...] = ()
 
     def summary(self) -> str:
         """A plain-words account for the terminal."""
@@ -110,6 +111,8 @@ class Diagnosis:
         for e in self.effects:
             lines.append(f"missing physics on {e.joint}: {e.type.replace('_', ' ')} = {e.value:.4g} {e.unit} "
                          f"(95% [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]), ΔBIC {e.delta_bic:.0f}")
+        for k, h in enumerate(self.held_out_others):
+            lines.append(f"other recording {k + 1}: prediction RMS before {h.rms_before:.4g}, after {h.rms_after:.4g}")
         if self.held_out is not None:
             lines.append(f"held-out prediction RMS: before {self.held_out.rms_before:.4g}, after "
                          f"{self.held_out.rms_after:.4g} (×{self.held_out.rms_before / max(self.held_out.rms_after, 1e-12):.1f} better)")
@@ -163,12 +166,18 @@ def diagnose(
     candidates: tuple[str, ...] = tuple(CANDIDATES),
     max_effects: int = 4,
     progress=None,
+    segment_s: float | None = None,
+    other_recordings: tuple[Recording, ...] = (),
 ) -> Diagnosis:
     """Locate, explain, model and show the mismatch between ``model`` and ``recording``.
 
     holdout_fraction: the last part of the recording kept out of every fit and used to compare
     predictions before vs after.  candidates: effect types to test (DESIGN.md names).
     progress: optional callable(str) receiving one line per stage.
+    segment_s: fit in segments of this length [s] (see ``nlp.joint_space``), and predict held-out
+    data segment by segment from each segment's first state; use it for long oscillating
+    recordings.  other_recordings: further recordings of the same system, used only to compare
+    predictions before vs after (``Diagnosis.held_out_others``).
     """
     say = progress or (lambda s: None)
     rec = match_recording(model, recording)
@@ -183,7 +192,7 @@ def diagnose(
     sigma_q = noise_std(fit_rec.q)
 
     say("fitting the nominal model")
-    nominal = calibrate(model, fit_rec, free=[])
+    nominal = calibrate(model, fit_rec, free=[], segment_s=segment_s)
     mismatch = locate(model, fit_rec, nominal.q_fit, sigma_q)
 
     selected: list[tuple[str, str, float]] = []  # (joint, effect, delta_bic)
@@ -206,7 +215,7 @@ def diagnose(
                 else:
                     trial_eff = {**eff, joint: eff.get(joint, ()) + (effect,)}
                 say(f"testing {effect} on {joint}")
-                cal = calibrate(model, fit_rec, free=free + names, effects=trial_eff)
+                cal = calibrate(model, fit_rec, free=free + names, effects=trial_eff, segment_s=segment_s)
                 d = delta_bic(cal, current, _n_params(names), sigma_q)
                 size = float(np.sqrt(np.mean(((cal.q_fit - current.q_fit) / sigma_q) ** 2)))
                 supported = cal.success and not _at_bound(cal, names) and size >= MIN_EFFECT_SIZE_SIGMA
@@ -245,8 +254,31 @@ def diagnose(
     held_out = None
     if held is not None:
         say("predicting the held-out span")
-        held_out = HeldOut(held.t, held.q, _predict(model, held), _predict(final.model, held))
-    return Diagnosis(tuple(mismatch), tuple(found), tuple(tested), nominal, final, final.model, held_out)
+        held_out = predict_before_after(model, final.model, held, segment_s)
+    others = []
+    for k, other in enumerate(other_recordings):
+        say(f"predicting other recording {k + 1}/{len(other_recordings)}")
+        others.append(predict_before_after(model, final.model, match_recording(model, other), segment_s))
+    return Diagnosis(tuple(mismatch), tuple(found), tuple(tested), nominal, final, final.model, held_out, tuple(others))
+
+
+def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec: Recording, segment_s: float | None) -> HeldOut:
+    """Simulated q of both models on ``rec`` (segment by segment when ``segment_s`` is given)."""
+    edges = [rec.t[0]] if not segment_s else list(np.arange(rec.t[0], rec.t[-1], segment_s))
+    edges.append(rec.t[-1] + 1e-9)
+    parts_b, parts_a = [], []
+    for a, b in zip(edges[:-1], edges[1:]):
+        m = (rec.t >= a) & (rec.t < b)
+        if m.sum() < 8:  # too short to estimate a starting state: score the previous segment only
+            parts_b.append(np.full((m.sum(), rec.q.shape[1]), np.nan))
+            parts_a.append(parts_b[-1])
+            continue
+        seg = rec.window(rec.t[m][0], rec.t[m][-1])
+        parts_b.append(_predict(before, seg))
+        parts_a.append(_predict(after, seg))
+    q_b, q_a = np.vstack(parts_b), np.vstack(parts_a)
+    ok = ~np.isnan(q_b).any(axis=1)
+    return HeldOut(rec.t[ok], rec.q[ok], q_b[ok], q_a[ok])
 
 
 def _axis_world(model: ArticulatedModel, joint: str) -> np.ndarray:
