@@ -30,10 +30,11 @@ class EffectRecording:
 
 
 def stroke_plan():
-    """The demo's hand plan: one stroke to mid-range, released, then free."""
+    """Two strokes (to 50 % and back to 30 % of the range), each released and left free, so the
+    held-out last quarter still contains motion."""
     from ..synth.groundtruth import HandPlan
 
-    return HandPlan(goals=(0.5,), push_s=0.8, free_s=1.7, release_speed=0.15)
+    return HandPlan(goals=(0.5, 0.3), push_s=0.8, free_s=1.7, release_speed=0.15)
 
 
 def effect_recording(case_name: str, noise_seed: int = 0, rate_hz: int = RATE_HZ) -> EffectRecording:

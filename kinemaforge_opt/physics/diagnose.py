@@ -184,6 +184,7 @@ def diagnose(
     unknown = [c for c in candidates if c not in CANDIDATES]
     if unknown:
         raise DataError(f"unknown candidate effect(s) {unknown}; available: {', '.join(CANDIDATES)}")
+    rec = before_nominal_stops(model, rec)
     split = int(round(rec.t.size * (1 - holdout_fraction)))
     if split < 10:
         raise DataError(f"recording has {rec.t.size} samples: too few to fit and hold out {holdout_fraction:.0%}")
@@ -260,6 +261,30 @@ def diagnose(
         say(f"predicting other recording {k + 1}/{len(other_recordings)}")
         others.append(predict_before_after(model, final.model, match_recording(model, other), segment_s))
     return Diagnosis(tuple(mismatch), tuple(found), tuple(tested), nominal, final, final.model, held_out, tuple(others))
+
+
+def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
+    """The recording up to the first time a joint reaches a stop that the model itself declares
+    (its URDF limits, within max(5 noise sigma, 1 % of the range)): impacts on known stops are
+    nominal physics, not a mismatch, and carry nothing about the joint's dynamics."""
+    sigma = noise_std(rec.q)
+    hit = np.zeros(rec.t.size, dtype=bool)
+    for k, j in enumerate(model.movable_joints):
+        lim = j.limits
+        if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
+            continue
+        tol = max(5 * sigma[k], 0.01 * (lim.upper - lim.lower))
+        moved = np.cumsum(np.abs(np.diff(rec.q[:, k], prepend=rec.q[0, k]))) > tol  # ignore a start at rest on a stop
+        hit |= moved & ((rec.q[:, k] <= lim.lower + tol) | (rec.q[:, k] >= lim.upper - tol))
+    if not hit.any():
+        return rec
+    end = int(np.argmax(hit))
+    if end < 20:
+        raise DataError(
+            f"the recording reaches a joint stop declared by the model after {rec.t[end] - rec.t[0]:.2f} s "
+            f"(sample {end}); too little motion before it to diagnose"
+        )
+    return rec.window(rec.t[0], rec.t[end - 1])
 
 
 def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec: Recording, segment_s: float | None) -> HeldOut:
