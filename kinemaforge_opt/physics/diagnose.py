@@ -299,8 +299,8 @@ def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec:
             parts_a.append(parts_b[-1])
             continue
         seg = rec.window(rec.t[m][0], rec.t[m][-1])
-        parts_b.append(_predict(before, seg))
-        parts_a.append(_predict(after, seg))
+        parts_b.append(simulate_recording(before, seg))
+        parts_a.append(simulate_recording(after, seg))
     q_b, q_a = np.vstack(parts_b), np.vstack(parts_a)
     ok = ~np.isnan(q_b).any(axis=1)
     return HeldOut(rec.t[ok], rec.q[ok], q_b[ok], q_a[ok])
@@ -317,10 +317,10 @@ def _axis_world(model: ArticulatedModel, joint: str) -> np.ndarray:
     return pd.oMi[pm.getJointId(joint)].rotation @ j.axis
 
 
-def _predict(model: ArticulatedModel, rec: Recording) -> np.ndarray:
-    """Simulate ``model`` from the first state of ``rec`` (state from a smoothed fit) under its
-    recorded forcing; returns q (T, n).  Pinocchio ABA + the model's joint dynamics, integrated
-    with an adaptive Runge–Kutta (scipy)."""
+def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | None = None) -> np.ndarray:
+    """q (T, n) of ``model`` simulated over ``rec`` from its smoothed first state under its
+    recorded tau, with the model's joint dynamics plus optional per-joint ``extra`` force laws
+    f(q, v) [N·m or N].  Pinocchio ABA, integrated by LSODA (scipy)."""
     import pinocchio as pin
     from scipy.integrate import solve_ivp
 
@@ -331,13 +331,15 @@ def _predict(model: ArticulatedModel, rec: Recording) -> np.ndarray:
     pd = pm.createData()
     joints = model.movable_joints
     n = len(joints)
+    laws = [(extra or {}).get(j.name) for j in joints]
     q0, v0, _ = smooth_derivatives(rec)
     tau = rec.tau if rec.tau is not None else np.zeros((rec.t.size, n))
 
     def rhs(t, x):
         q, v = x[:n], x[n:]
         u = np.array([np.interp(t, rec.t, tau[:, k]) for k in range(n)])
-        u = u + np.array([j.dynamics.passive_force(q[k], v[k]) for k, j in enumerate(joints)])
+        u += [j.dynamics.passive_force(q[k], v[k]) + (f(q[k], v[k]) if f else 0.0)
+              for k, (j, f) in enumerate(zip(joints, laws))]
         return np.concatenate([v, pin.aba(pm, pd, q, v, u)])
 
     sol = solve_ivp(rhs, (rec.t[0], rec.t[-1]), np.concatenate([q0[0], v0[0]]), t_eval=rec.t,
