@@ -87,6 +87,8 @@ def test_missing_sequence_json(tmp_path):
         (lambda d: d["frames"][1].update(index=0), r"field 'frames\[1\]\.index' repeats index 0"),
         (lambda d: d["frames"][3]["T_world_camera"][0].__setitem__(0, 2.0),
          r"field 'frames\[3\]\.T_world_camera' must be a rigid transform"),
+        (lambda d: d["frames"][3]["T_world_camera"][1].__setitem__(3, float("nan")),
+         r"field 'frames\[3\]\.T_world_camera' must be"),
         (lambda d: d["frames"][3].update(T_world_camera=[[1, 0, 0]]),
          r"field 'frames\[3\]\.T_world_camera' must be a 4×4 list"),
     ],

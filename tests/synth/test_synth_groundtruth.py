@@ -82,6 +82,20 @@ def test_concealed_spring_settles_at_its_rest_position(door):
     assert abs(ep.v[-1, 0]) < 1e-3
 
 
+def test_concealed_spring_oscillates_with_the_analytic_period(door):
+    """Undamped door on a spring: period 2π sqrt(I/k), I about the (vertical) hinge axis."""
+    k = 30.0
+    plan = HandPlan(goals=(0.5,), push_s=0.5, free_s=4.0)
+    ep = simulate(door.model, door.handles, (E("spring", "door_joint", k, (("rest", 0.6),)),), plan, record_hz=600)
+    free = free_phase(ep, plan)
+    t, x = ep.t[free], ep.q[free, 0] - 0.6
+    up = np.flatnonzero((x[:-1] < 0) & (x[1:] >= 0))
+    crossings = t[up] - x[up] * (t[up + 1] - t[up]) / (x[up + 1] - x[up])  # linear interpolation
+    assert len(crossings) >= 2
+    period = float(np.mean(np.diff(crossings)))
+    assert period == pytest.approx(2 * np.pi * np.sqrt(axis_inertia(door, "door_joint") / k), rel=0.01)
+
+
 @pytest.mark.parametrize(
     "effect, law",
     [
