@@ -33,6 +33,9 @@ DELTA_BIC = -10.0
 # An accepted effect must also matter: it must move the fitted trajectory by at least this RMS,
 # in units of the encoder noise (else it only polishes residual model-form error).
 MIN_EFFECT_SIZE_SIGMA = 1.0
+# A hypothesis whose fit has not converged after this many IPOPT iterations is not accepted
+# (well-posed candidates converge in 5–30).
+CANDIDATE_MAX_ITER = 100
 
 # effect type -> parameters freed when the effect is tested (first = reported value)
 CANDIDATES: dict[str, tuple[str, ...]] = {
@@ -216,7 +219,8 @@ def diagnose(
                 else:
                     trial_eff = {**eff, joint: eff.get(joint, ()) + (effect,)}
                 say(f"testing {effect} on {joint}")
-                cal = calibrate(model, fit_rec, free=free + names, effects=trial_eff, segment_s=segment_s)
+                cal = calibrate(model, fit_rec, free=free + names, effects=trial_eff, segment_s=segment_s,
+                                max_iter=CANDIDATE_MAX_ITER)
                 d = delta_bic(cal, current, _n_params(names), sigma_q)
                 size = float(np.sqrt(np.mean(((cal.q_fit - current.q_fit) / sigma_q) ** 2)))
                 supported = cal.success and not _at_bound(cal, names) and size >= MIN_EFFECT_SIZE_SIGMA
