@@ -2,6 +2,8 @@
 
 * :mod:`.discovery` — mismatch discovery (diagnose vs :mod:`.baselines`) on concealed effects;
 * :mod:`.stages` — real Sturm logs, calibration on the demo door, time per stage and scaling;
+* :func:`kinemaforge_opt.arm.side_by_side.compare_arm_models` — the robot arm: nominal vs IDIM-LS
+  vs kinemaforge_opt (held-out torque and tracking RMS);
 * :mod:`.report` — JSON, Markdown and PNG output (placeholders for the RGB-D tables);
 * :mod:`.run` — the sizes (``QUICK``, ``FULL``) and the runner.
 """

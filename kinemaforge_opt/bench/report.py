@@ -66,6 +66,35 @@ def calibration_table(rows: list[dict]) -> str:
     return "## Calibration on the demo door\n\n" + _table(head, out) + "\n"
 
 
+def arm_table(arm: dict) -> str:
+    """The robot-arm side-by-side (:func:`kinemaforge_opt.arm.side_by_side.compare_arm_models`
+    result): per real arm and model the mean over joints of the held-out torque RMS [N·m] and of
+    the computed-torque tracking RMS [mrad], the fit time, then the same per joint."""
+    exc = arm["excitation"]
+    held = list(next(iter(arm["arms"].values()))["heldout_torque_rms_nm"])
+    head = ["real arm", "model"] + [f"torque RMS, {h} [N·m]" for h in held] + ["tracking RMS [mrad]", "fit time [s]"]
+    rows, per, notes = [], [], []
+    for name, a in arm["arms"].items():
+        for m in arm["models"]:
+            rows.append([name, m] + [f"{a['heldout_torque_rms_nm'][h][m]['mean']:.3f}" for h in held]
+                        + [f"{a['tracking_rms_mrad'][m]['mean']:.2f}", _fmt(a["fit_time_s"][m], ".2f")])
+            per += [[name, m, f"torque RMS, {h} [N·m]"] + [f"{x:.3f}" for x in a["heldout_torque_rms_nm"][h][m]["per_joint"]]
+                    for h in held]
+            per.append([name, m, "tracking RMS [mrad]"] + [f"{x:.2f}" for x in a["tracking_rms_mrad"][m]["per_joint"]])
+        notes.append(f"- {name}: fit on {a['fit_duration_s']:.1f} s at {a['rate_hz']:.0f} Hz; IDIM-LS "
+                     f"{a['idim_base_parameters']} base parameters; kinemaforge_opt {a['ipopt_status']} "
+                     f"({a['ipopt_iterations']} IPOPT iterations), identified inertias physically consistent: "
+                     f"{a['physically_consistent']}")
+    joints = [j[-6:] for j in arm["joints"]]
+    return ("## robot arm: held-out torque RMS and tracking RMS, nominal vs IDIM-LS vs kinemaforge_opt\n\n"
+            f"Excitation {exc['duration_s']:g} s (fits on the first 75 %), second trajectory {exc['test_duration_s']:g} s; "
+            f"cond(W_base) {exc['initial_condition']:.1f} (random start) -> {exc['condition']:.1f} "
+            f"({exc['iterations']} SLSQP iterations, {exc['design_time_s']:.1f} s); tracking: computed torque on "
+            "the second trajectory.\n\n"
+            + _table(head, rows) + "\n\n" + "\n".join(notes) + "\n\n### Per joint\n\n"
+            + _table(["real arm", "model", "quantity"] + joints, per) + "\n")
+
+
 def timing_tables(stages: dict, scaling: dict) -> str:
     rows = [[k, f"{v:.3f}"] for k, v in stages.items()]
     pts = [[str(p["rate_hz"]), str(p["samples"]), f"{p['time_s']:.2f}", str(p["iterations"]), str(p["converged"])]
@@ -135,7 +164,7 @@ def write_report(result: dict, out_dir: str | Path) -> dict[str, Path]:
     md = "\n".join([
         f"# kinemaforge bench ({result['size']})\n\n{result['machine']}; total {result['total_s']:.0f} s\n",
         discovery_tables(result["discovery"]["summary"], result["discovery"]["cases"]),
-        sturm_table(result["sturm"]), calibration_table(result["calibration"]),
+        sturm_table(result["sturm"]), calibration_table(result["calibration"]), arm_table(result["arm"]),
         timing_tables(result["stage_time_s"], result["scaling"]), placeholder_tables(),
     ])
     paths = {"json": out / "bench.json", "markdown": out / "bench.md"}

@@ -7,9 +7,10 @@ import argparse
 EPILOG = """\
 sizes:
   --quick   each concealed effect alone on the door and the drawer plus the null cases, one
-            noise seed, one demo-door seed, calibrate scaling at 30/60/120 Hz
+            noise seed, one demo-door seed, calibrate scaling at 30/60/120 Hz, the robot-arm
+            side-by-side (nominal vs IDIM-LS vs kinemaforge_opt) on a 6 s excitation
   (full)    adds the effect pairs, three noise seeds, three demo-door seeds, scaling up to
-            400 Hz; each run writes its runtime to bench.json ("total_s")
+            400 Hz, a 20 s arm excitation; each run writes its runtime to bench.json ("total_s")
 
 outputs: DIR/bench.json, DIR/bench.md, DIR/scaling.png, DIR/discovery.png
 """

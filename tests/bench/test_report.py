@@ -6,6 +6,27 @@ from kinemaforge_opt.bench.discovery import CaseScore, as_dicts, summarise
 from kinemaforge_opt.bench.report import NOT_MEASURED, write_report
 
 
+def _arm():
+    """A two-joint, one-arm stand-in for a ``compare_arm_models`` result."""
+    models = ("nominal", "IDIM-LS", "kinemaforge_opt")
+    rms = lambda x: {"per_joint": [x, 2 * x], "mean": 1.5 * x}  # noqa: E731
+    return {
+        "quick": True, "joints": ["panda_joint1", "panda_joint2"], "models": list(models),
+        "excitation": {"duration_s": 6.0, "test_duration_s": 5.0, "initial_condition": 483.0, "condition": 83.3,
+                       "iterations": 5, "design_time_s": 7.7},
+        "arms": {"panda_kitchen": {
+            "fit_duration_s": 4.5, "rate_hz": 1000.0, "fit_time_s": {"nominal": None, "IDIM-LS": 0.6, "kinemaforge_opt": 1.3},
+            "idim_base_parameters": 20, "ipopt_status": "Solve_Succeeded", "ipopt_iterations": 160,
+            "identifiability": "…", "physically_consistent": True,
+            "friction": {k: {"IDIM-LS": [0.1, 0.2], "kinemaforge_opt": [0.1, 0.2]} for k in ("viscous", "coulomb")},
+            "heldout_torque_rms_nm": {h: {m: rms(x) for m, x in zip(models, (1.0, 0.16, 0.15))}
+                                      for h in ("excitation last 25%", "second trajectory")},
+            "tracking_rms_mrad": {m: rms(x) for m, x in zip(models, (150.0, 3.0, 1.8))},
+        }},
+        "total_s": 18.0,
+    }
+
+
 def _result():
     scores = [
         CaseScore("effect_door_spring", "diagnose", ("spring",), ("spring",), 1, 0, 0, {"spring": 0.02}, 0.04, 0.004, 5.0),
@@ -22,7 +43,7 @@ def _result():
         "scaling": {"points": [{"rate_hz": 30, "samples": 76, "time_s": 1.0, "iterations": 5, "converged": True},
                                {"rate_hz": 60, "samples": 151, "time_s": 4.0, "iterations": 5, "converged": True}],
                     "exponent": 2.0},
-        "stage_time_s": {"diagnose per case (diagnose)": 4.0},
+        "arm": _arm(), "stage_time_s": {"diagnose per case (diagnose)": 4.0},
     }
 
 
@@ -38,5 +59,7 @@ def test_write_report(tmp_path):
     md = paths["markdown"].read_text()
     assert "Mismatch discovery" in md and "| diagnose | 2 |" in md
     assert md.count(NOT_MEASURED) >= 6 * 5 + 5 * 5  # Table 1 and Table 2 cells are placeholders
+    assert "| panda_kitchen | kinemaforge_opt | 0.225 | 0.225 | 2.70 | 1.30 |" in md
+    assert "| panda_kitchen | nominal | tracking RMS [mrad] | 150.00 | 300.00 |" in md
     assert json.loads(paths["json"].read_text())["size"] == "test"
     assert paths["scaling"].stat().st_size > 0 and paths["discovery"].stat().st_size > 0
