@@ -35,6 +35,9 @@ def register(sub) -> None:
     p.add_argument("--energy", choices=("soft", "hard", "off"), default="soft",
                    help="energy balance as a soft penalty, a hard constraint, or off (default soft)")
     p.add_argument("--substeps", type=int, default=1, help="collocation intervals per sample (default 1)")
+    p.add_argument("--method", choices=("collocation", "inverse_dynamics"), default="collocation",
+                   help="output error by collocation (any recording) or torque error by inverse "
+                   "dynamics (needs recorded tau; long high-rate robot recordings)")
     p.set_defaults(func=run)
 
 
@@ -49,8 +52,11 @@ def run(args) -> int:
     model = read_urdf(args.model)
     rec = read_recording(args.recording)
     free = [s.strip() for s in args.free.split(",") if s.strip()] if args.free else None
+    from ..nlp.joint_space import match_recording
+
+    match_recording(model, rec)  # names the joint at fault before any work
     print(f"calibrating {len(rec.t)} samples × {len(rec.joint_names)} joints …", flush=True)
-    cal = calibrate(model, rec, free=free, energy=args.energy, substeps=args.substeps)
+    cal = calibrate(model, rec, free=free, energy=args.energy, substeps=args.substeps, method=args.method)
     out = Path(args.out)
     write_urdf(cal.model, out / "model.urdf")
     write_text_atomic(out / "calibration.json", json.dumps(cal.to_dict(), indent=2))

@@ -55,10 +55,6 @@ def run(args) -> int:
     model = read_urdf(args.model)
     rec = read_recording(args.recording)
     match_recording(model, rec)  # bad input fails before any work (and before the progress bar)
-    if rec.t.size < 10:
-        from ..errors import DataError
-
-        raise DataError(f"{args.recording}: {rec.t.size} samples are too few to identify anything")
     bar = tqdm(desc="diagnose", unit="fit", leave=False)
 
     def progress(msg: str) -> None:

@@ -164,15 +164,11 @@ def filtered_states(rec: Recording, cutoff_hz: float) -> tuple[np.ndarray, ...]:
 
 
 def _check_inputs(model: ArticulatedModel, recording: Recording) -> Recording:
-    missing = [j for j in model.joint_names if j not in recording.joint_names]
-    if missing:
-        raise DataError(f"recording has no q column for joint(s) {missing} of model {model.name!r}")
-    extra = [j for j in recording.joint_names if j not in model.joint_names]
-    if extra:
-        raise UnknownNameError("joint (recorded)", extra[0], model.joint_names)
+    from .joint_space import match_recording
+
     if recording.tau is None:
         raise DataError("inverse-dynamics calibration needs measured torques: the recording has no tau:<joint> columns")
-    rec = recording.select(model.joint_names)
+    rec = match_recording(model, recording)  # joint names, motion, SI units
     still = [j for j, span in zip(model.joint_names, np.ptp(rec.q, axis=0)) if span < 1e-6]
     if still:
         raise DataError(f"recording shows no motion of joint(s) {still}: their dynamics cannot be identified")

@@ -56,6 +56,9 @@ _EFFECT_PARAMS = {
 }
 
 
+MIN_SAMPLES = 10  # below this, noise levels (third differences) and any parameter are undetermined
+
+
 def match_recording(model: ArticulatedModel, recording: Recording) -> Recording:
     """``recording`` restricted and ordered to the model's joints.  Raises :class:`DataError` /
     :class:`UnknownNameError` naming the joints when the two disagree, or when nothing moves."""
@@ -66,9 +69,40 @@ def match_recording(model: ArticulatedModel, recording: Recording) -> Recording:
     if missing:
         raise DataError(f"recording has no q column for joint(s) {missing} of model {model.name!r}")
     rec = recording.select(model.joint_names)
+    if rec.t.size < MIN_SAMPLES:
+        raise DataError(f"recording has {rec.t.size} samples: too few to identify anything (at least {MIN_SAMPLES})")
     if np.all(np.ptp(rec.q, axis=0) < 1e-9):
         raise DataError("recording shows no motion: every joint stays at its initial position")
+    check_units(model, rec)
     return rec
+
+
+def check_units(model: ArticulatedModel, rec: Recording) -> None:
+    """Raise :class:`DataError` naming the joint when recorded values are implausible for the
+    model in SI units: positions far outside the joint's limits (beyond one range width past
+    either end — degrees or millimetres recorded as rad or m) or applied forces above 100× the
+    joint's effort limit (e.g. N·mm)."""
+    for k, j in enumerate(model.movable_joints):
+        lim = j.limits
+        if lim is None:
+            continue
+        unit = "m" if j.type == "prismatic" else "rad"
+        if np.isfinite(lim.lower) and np.isfinite(lim.upper) and lim.upper > lim.lower:
+            span = lim.upper - lim.lower
+            lo, hi = float(rec.q[:, k].min()), float(rec.q[:, k].max())
+            if lo < lim.lower - span or hi > lim.upper + span:
+                hint = "millimetres instead of metres" if unit == "m" else "degrees instead of radians"
+                raise DataError(
+                    f"recording q:{j.name} spans [{lo:.4g}, {hi:.4g}] but the joint's limits are "
+                    f"[{lim.lower:.4g}, {lim.upper:.4g}] {unit}: {hint}?"
+                )
+        if rec.tau is not None and np.isfinite(lim.effort) and lim.effort > 0:
+            peak = float(np.abs(rec.tau[:, k]).max())
+            if peak > 100 * lim.effort:
+                raise DataError(
+                    f"recording tau:{j.name} reaches {peak:.4g}, over 100× the joint's effort limit "
+                    f"{lim.effort:.4g} (SI units expected: N·m or N)"
+                )
 
 
 def noise_std(x: np.ndarray) -> np.ndarray:

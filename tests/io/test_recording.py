@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from kinemaforge_opt.cli import main as cli_main
@@ -21,6 +23,11 @@ BAD = {
     "bad_column": ("t,x:hinge\n0,0\n0.1,0\n", r"column 1 'x:hinge' is not one of", None),
     "orphan_tau": ("t,q:hinge,tau:door\n0,0,0\n0.1,0,0\n", r"tau:door has no matching q:door", None),
     "too_short": ("t,q:hinge\n0,0\n0.1,0.1\n0.2,0.2\n0.3,0.3\n", None, "too few"),
+    "degrees": ("t,q:hinge\n" + "".join(f"{0.01 * i},{1.5 * i}\n" for i in range(50)), None,
+                r"q:hinge spans \[0, 73\.5\] but the joint's limits are \[0, 2\.4\] rad: degrees instead of radians\?"),
+    "newton_millimetres": ("t,q:hinge,tau:hinge\n" + "".join(f"{0.01 * i},{0.01 * i},{5000.0}\n" for i in range(50)), None,
+                           r"tau:hinge reaches 5000, over 100× the joint's effort limit 5"),
+    "nan_torque": ("t,q:hinge,tau:hinge\n0,0,0\n0.1,0.1,nan\n0.2,0.2,0\n", r"tau:hinge is not finite at row 1", None),
 }
 
 
@@ -33,12 +40,13 @@ def test_bad_recordings_exit_2_with_a_named_message(case, tmp_path, capsys):
         with pytest.raises(InputFileError, match=read_error) as info:
             read_recording(path)
         assert f"{case}.csv" in str(info.value)
-    code = cli_main(["diagnose", LAPTOP, str(path), "-o", str(tmp_path / "out"), "--no-drift"])
-    assert code == 2
-    err = capsys.readouterr().err
-    assert err.startswith("kinemaforge diagnose: error:")
-    assert case + ".csv" in err or cli_error and __import__("re").search(cli_error, err), err
-    assert not (tmp_path / "out" / "model.urdf").exists()
+    for command in (["diagnose", LAPTOP, str(path), "--no-drift"], ["calibrate", LAPTOP, str(path)]):
+        code = cli_main(command + ["-o", str(tmp_path / "out")])
+        assert code == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"kinemaforge {command[0]}: error:")
+        assert case + ".csv" in err or cli_error and re.search(cli_error, err), err
+        assert not (tmp_path / "out" / "model.urdf").exists()
 
 
 def test_round_trip(tmp_path):
