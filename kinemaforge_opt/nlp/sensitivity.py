@@ -67,9 +67,8 @@ def fit_sensitivity(fit: JointSpaceFit, X: np.ndarray, z: np.ndarray, rel_tol: f
     D = fit.defects(Xs, zs)
     jac = ca.Function("defect_jacobians", [Xs, zs], [ca.jacobian(D, Xs), ca.jacobian(D, zs)])
     JX, Jz = jac(X, z)
-    JX = sp.csc_matrix(JX.sparse()) if hasattr(JX, "sparse") else sp.csc_matrix(np.asarray(JX))
-    Jz = np.asarray(Jz.full()) if hasattr(Jz, "full") else np.asarray(Jz)
-    r = np.asarray(fit.residuals(X).full()).ravel()
+    JX, Jz = sp.csc_matrix(JX.sparse()), Jz.full()
+    r = fit.residuals(X).full().ravel()
     Rj = ca.Function("residual_jacobian", [Xs], [ca.jacobian(fit.residuals(Xs), Xs)])(X)
     Rj = sp.csr_matrix(Rj.sparse())
 
@@ -83,21 +82,20 @@ def fit_sensitivity(fit: JointSpaceFit, X: np.ndarray, z: np.ndarray, rel_tol: f
     dX[free_idx, np.arange(n_free)] = 1.0
     dX[rest_idx] = -spla.splu(A.tocsc()).solve(B)
     J = Rj @ dX
-    nx = n_free  # from here on, "initial state" means all free segment states
 
     # Reduce axis blocks to their tangent plane.
-    cols, labels, pieces = [], [], []
-    nrow = nx + z.size
+    labels = []
+    nrow = n_free + z.size
     P = []
-    for i in range(nx):
+    for i in range(n_free):
         e = np.zeros(nrow)
         e[i] = 1
         P.append(e)
         labels.append(f"initial state[{i}]")
-    offset = nx
+    offset = n_free
     for b in fit.blocks:
         if b.name.endswith(".axis"):
-            Bt = _tangent_basis(z[offset - nx : offset - nx + 3])
+            Bt = _tangent_basis(z[offset - n_free : offset - n_free + 3])
             for k in range(2):
                 e = np.zeros(nrow)
                 e[offset : offset + 3] = Bt[:, k]
@@ -110,7 +108,7 @@ def fit_sensitivity(fit: JointSpaceFit, X: np.ndarray, z: np.ndarray, rel_tol: f
                 P.append(e)
                 labels.append(b.name if b.size == 1 else f"{b.name}[{k}]")
         offset += b.size
-    P = np.stack(P, axis=1)  # (nx + nz, reduced)
+    P = np.stack(P, axis=1)  # (n_free + nz, reduced)
     Jr = J @ P
     F = Jr.T @ Jr
     dof = max(r.size - F.shape[0], 1)
@@ -128,10 +126,10 @@ def fit_sensitivity(fit: JointSpaceFit, X: np.ndarray, z: np.ndarray, rel_tol: f
     unidentifiable = []
     for k in np.where(~keep)[0]:
         vec = V[:, k]
-        combo = {labels[i]: float(vec[i]) for i in np.argsort(-np.abs(vec)) if abs(vec[i]) > 0.2 and i >= nx}
+        combo = {labels[i]: float(vec[i]) for i in np.argsort(-np.abs(vec)) if abs(vec[i]) > 0.2 and i >= n_free}
         if combo:
             unidentifiable.append(combo)
     # Back to full z coordinates (axis blocks: tangent covariance mapped into 3-D).
-    Pz = P[nx:, nx:] if P.shape[1] > nx else np.zeros((z.size, 0))
-    cov_z = Pz @ cov_r[nx:, nx:] @ Pz.T
+    Pz = P[n_free:, n_free:] if P.shape[1] > n_free else np.zeros((z.size, 0))
+    cov_z = Pz @ cov_r[n_free:, n_free:] @ Pz.T
     return Sensitivity(cov_z, tuple(labels), tuple(unidentifiable), s2, dof)
