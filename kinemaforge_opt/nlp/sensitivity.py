@@ -115,7 +115,11 @@ def fit_sensitivity(fit: JointSpaceFit, X: np.ndarray, z: np.ndarray, rel_tol: f
     # Residual variance, inflated by the AR(1) variance factor (1 + rho)/(1 - rho) of the
     # residuals' lag-1 autocorrelation: model-form error makes residuals correlated in time, and
     # treating them as independent would understate the uncertainty.
-    s2 = float(r @ r) / dof * ar1_inflation(r.reshape(-1, T) if r.size % T == 0 else r[None, :])
+    # r stacks vec(R) of (n, T_samples) residual blocks (q, then v), column-major: one series
+    # per joint and block.
+    n_samples = fit.recording.t.size
+    series = r.reshape(-1, n_samples, fit.model.nq).transpose(0, 2, 1).reshape(-1, n_samples)
+    s2 = float(r @ r) / dof * ar1_inflation(series)
 
     d = np.sqrt(np.maximum(np.diag(F), 1e-300))
     Fn = F / np.outer(d, d)
