@@ -161,18 +161,11 @@ class JointDynamics:
 
     def passive_force(self, q, v):
         """Generalised passive force at (q, v); numpy arrays or casadi symbols (smooth sign)."""
-        from ..physics.effects import EFFECTS
+        from ..physics.effects import EFFECTS, dynamics_effects
 
-        total = EFFECTS["viscous_damping"].force(q, v, self.damping)
-        total = total + EFFECTS["coulomb_friction"].force(q, v, self.coulomb)
-        if self.stribeck:
-            total = total + EFFECTS["stribeck_friction"].force(q, v, self.stribeck, self.v_stribeck)
-        if self.spring_stiffness:
-            total = total + EFFECTS["spring"].force(q, v, self.spring_stiffness, self.spring_rest)
-        if self.bias:
-            total = total + EFFECTS["constant_bias"].force(q, v, self.bias)
-        if self.drag:
-            total = total + EFFECTS["quadratic_drag"].force(q, v, self.drag)
+        total = 0 * v
+        for t in dynamics_effects(self):
+            total = total + EFFECTS[t].force(q, v, *(getattr(self, p) for p in EFFECTS[t].params))
         return total
 
 

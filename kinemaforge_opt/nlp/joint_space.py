@@ -32,7 +32,7 @@ from ..errors import DataError, KinemaforgeError, UnknownNameError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..model.pinocchio import build_pin_model
-from ..physics.effects import EFFECTS
+from ..physics.effects import EFFECTS, FORCE_EFFECTS, dynamics_effects
 from ..symbolic import Dynamics, available_parameters, build_dynamics
 from .parameters import (
     FORCE_PARAMS,
@@ -45,15 +45,7 @@ from .parameters import (
 from .problem import Problem
 
 # Which force-parameter groups make up each force effect.
-_EFFECT_PARAMS = {
-    "viscous_damping": ("damping",),
-    "coulomb_friction": ("coulomb",),
-    "stribeck_friction": ("stribeck", "v_stribeck"),
-    "spring": ("spring_stiffness", "spring_rest"),
-    "constant_bias": ("bias",),
-    "quadratic_drag": ("drag",),
-    "limit_contact": ("limit_stop", "limit_stiffness"),
-}
+_EFFECT_PARAMS = {t: EFFECTS[t].params for t in FORCE_EFFECTS}
 
 
 MIN_SAMPLES = 10  # below this, noise levels (third differences) and any parameter are undetermined
@@ -190,23 +182,7 @@ class JointSpaceFit:
 def active_effects(model: ArticulatedModel, extra: dict[str, tuple[str, ...]] | None = None) -> dict[str, tuple[str, ...]]:
     """Force effects acting on each movable joint: those with non-zero parameters in the model's
     JointDynamics, plus ``extra`` ({joint: (effect type, …)})."""
-    out = {}
-    for j in model.movable_joints:
-        d = j.dynamics
-        types = []
-        if d.damping:
-            types.append("viscous_damping")
-        if d.coulomb:
-            types.append("coulomb_friction")
-        if d.stribeck:
-            types.append("stribeck_friction")
-        if d.spring_stiffness:
-            types.append("spring")
-        if d.bias:
-            types.append("constant_bias")
-        if d.drag:
-            types.append("quadratic_drag")
-        out[j.name] = tuple(types)
+    out = {j.name: dynamics_effects(j.dynamics) for j in model.movable_joints}
     for joint, types in (extra or {}).items():
         if joint not in out:
             raise UnknownNameError("movable joint", joint, out)

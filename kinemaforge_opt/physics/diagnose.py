@@ -27,6 +27,7 @@ from ..errors import DataError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..nlp.joint_space import match_recording, noise_std
+from .effects import EFFECTS
 from .locate import JointMismatch, locate
 
 DELTA_BIC = -10.0
@@ -37,18 +38,12 @@ MIN_EFFECT_SIZE_SIGMA = 1.0
 # (well-posed candidates converge in 5–30).
 CANDIDATE_MAX_ITER = 100
 
-# effect type -> parameters freed when the effect is tested (first = reported value)
-CANDIDATES: dict[str, tuple[str, ...]] = {
-    "viscous_damping": ("damping",),
-    "coulomb_friction": ("coulomb",),
-    "spring": ("spring_stiffness", "spring_rest"),
-    "constant_bias": ("bias",),
-    "quadratic_drag": ("drag",),
-    "stribeck_friction": ("stribeck", "v_stribeck"),
-    "axis_tilt": ("axis",),
-    "inertia_error": ("inertia_ratio",),
-    "limit_contact": ("limit_stop", "limit_stiffness"),
-}
+# Effect types tested, in order; the parameters freed for each are its EFFECTS[type].params
+# (first = reported value).
+CANDIDATES: tuple[str, ...] = (
+    "viscous_damping", "coulomb_friction", "spring", "constant_bias", "quadratic_drag",
+    "stribeck_friction", "axis_tilt", "inertia_error", "limit_contact",
+)
 
 
 @dataclass(frozen=True)
@@ -141,7 +136,7 @@ def _free_for(model: ArticulatedModel, joint: str, effect: str) -> list[str]:
     """The parameter names freed to test ``effect`` on ``joint``."""
     if effect == "inertia_error":
         return [f"{model.joint(joint).child}.inertia_ratio"]
-    return [f"{joint}.{p}" for p in CANDIDATES[effect]]
+    return [f"{joint}.{p}" for p in EFFECTS[effect].params]
 
 
 def _reaches_limit(mismatch: tuple[JointMismatch, ...], joint: str) -> bool:
@@ -166,7 +161,7 @@ def diagnose(
     model: ArticulatedModel,
     recording: Recording,
     holdout_fraction: float = 0.25,
-    candidates: tuple[str, ...] = tuple(CANDIDATES),
+    candidates: tuple[str, ...] = CANDIDATES,
     max_effects: int = 4,
     progress=None,
     segment_s: float | None = None,

@@ -121,3 +121,12 @@ EFFECTS: dict[str, Effect] = {
 }
 
 FORCE_EFFECTS = tuple(t for t, e in EFFECTS.items() if e.force is not None)
+
+
+def dynamics_effects(dynamics) -> tuple[str, ...]:
+    """Force effects a :class:`~kinemaforge_opt.model.JointDynamics` switches on: those whose
+    parameters are its fields and whose first parameter (the reported value) is non-zero."""
+    return tuple(
+        t for t in FORCE_EFFECTS
+        if hasattr(dynamics, EFFECTS[t].params[0]) and getattr(dynamics, EFFECTS[t].params[0])
+    )
