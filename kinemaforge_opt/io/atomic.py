@@ -29,3 +29,17 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` to ``path`` atomically (UTF-8)."""
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
+
+
+def write_numeric_csv_atomic(path: str | os.PathLike, header, data) -> Path:
+    """Write a header row and the rows of a 2-D numeric array as CSV atomically, every value
+    at full float precision (``repr``)."""
+    import csv
+
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        with open(tmp, "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(header)
+            w.writerows([[repr(float(x)) for x in row] for row in data])
+    return path

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError, InputFileError, UnknownNameError
-from .atomic import atomic_path
+from .atomic import write_numeric_csv_atomic
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,10 +134,4 @@ def write_recording(path: str | os.PathLike, rec: Recording) -> Path:
         if arr is not None:
             header += [f"{kind}:{j}" for j in rec.joint_names]
             blocks.append(arr)
-    data = np.hstack(blocks)
-    with atomic_path(path) as tmp:
-        with open(tmp, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(header)
-            w.writerows([[repr(float(x)) for x in row] for row in data])
-    return path
+    return write_numeric_csv_atomic(path, header, np.hstack(blocks))

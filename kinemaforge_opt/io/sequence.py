@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputFileError
-from .atomic import atomic_path, write_text_atomic
+from .atomic import atomic_path, write_numeric_csv_atomic, write_text_atomic
 
 FORMAT = "kinemaforge.rgbd/1"
 WRENCH_COLUMNS = ("t", "px", "py", "pz", "fx", "fy", "fz")
@@ -307,11 +307,5 @@ def write_sequence_json(root: str | os.PathLike, cameras: dict[str, CameraInfo],
 
 def write_wrenches(path: str | os.PathLike, wrenches: Wrenches) -> Path:
     """Write ``wrenches.csv`` atomically (full float precision)."""
-    path = Path(path)
     data = np.column_stack([wrenches.t, wrenches.points_world, wrenches.forces_world])
-    with atomic_path(path) as tmp:
-        with open(tmp, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(WRENCH_COLUMNS)
-            w.writerows([[repr(float(x)) for x in row] for row in data])
-    return path
+    return write_numeric_csv_atomic(path, WRENCH_COLUMNS, data)
