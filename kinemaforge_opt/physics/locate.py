@@ -43,7 +43,7 @@ def smooth_derivatives(rec: Recording, window_s: float | None = None) -> tuple[n
     7 samples."""
     dt = rec.dt
     w = max(7, int(round((window_s or 0.15) / dt)) | 1)
-    w = min(w, (rec.t.size - 1) | 1 if rec.t.size % 2 == 0 else rec.t.size)
+    w = min(w, rec.t.size - 1 + rec.t.size % 2)  # the longest odd window the recording holds
     q = savgol_filter(rec.q, w, 3, axis=0)
     v = savgol_filter(rec.q, w, 3, deriv=1, delta=dt, axis=0)
     a = savgol_filter(rec.q, w, 3, deriv=2, delta=dt, axis=0)
