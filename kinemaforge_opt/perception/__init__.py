@@ -4,12 +4,14 @@
 ``tracks`` feed ``graph.infer_tree``; ``reconstruct_sequence(SEQ, OUT)`` is the whole RGB-D flow
 (URDF, meshes, reconstruction.json, clouds.npz).  Modules: ``clouds`` (back-projection, noise,
 fusion), ``change`` (free-space tests), ``segment`` (DBSCAN proposals, environment planes),
-``track`` (ICP tracking), ``surface`` (meshes, mass), ``reconstruct`` (the flow).
+``track`` (ICP tracking), ``perceive`` (the stages in order), ``surface`` (meshes, mass),
+``reconstruct`` (the flow).
 """
 
 from .change import MOVING, STATIC, UNKNOWN, free_space_test, motion_status
 from .clouds import DepthNoise, FrameCloud, TimeCloud, backproject, estimate_depth_noise
-from .reconstruct import BASE, ENVIRONMENT, Perception, Reconstruction, perceive, pixel_labels, reconstruct_sequence
+from .perceive import Perception, perceive
+from .reconstruct import BASE, ENVIRONMENT, Reconstruction, pixel_labels, reconstruct_sequence
 from .track import Proposal, Tracker
 
 __all__ = [
