@@ -21,7 +21,6 @@ from kinemaforge_opt.io.sequence import depth_to_png, load_sequence, write_png
 from kinemaforge_opt.synth.generate import DEPTH_SCALE, generate_case, scene_renderer
 from kinemaforge_opt.synth.groundtruth import simulate
 from kinemaforge_opt.synth.objects import make_object
-from kinemaforge_opt.synth.render import Intrinsics
 from kinemaforge_opt.synth.sensor import noisy_depth, noisy_rgb
 from problems.catalogue import get_case
 
@@ -44,8 +43,7 @@ def stage_breakdown(case, out: Path, sample: int) -> dict[str, float]:
     jobs = []
     for f in (seq.frames[i] for i in picks):
         cam = seq.cameras[f.camera]
-        intr = Intrinsics(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
-        jobs.append((f, intr, episode.Ts_world_link[int(np.argmin(np.abs(episode.t - f.t)))]))
+        jobs.append((f, cam, episode.Ts_world_link[int(np.argmin(np.abs(episode.t - f.t)))]))
     for f, intr, Ts in jobs:  # the static scene is cast once per camera: not part of the per-view cost
         renderer.render(Ts, intr, f.T_world_camera)
     with tempfile.TemporaryDirectory() as tmp:

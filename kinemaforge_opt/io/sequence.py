@@ -47,6 +47,12 @@ class CameraInfo:
         """(3, 3) camera matrix."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
+    @staticmethod
+    def from_hfov(name: str, width: int, height: int, hfov_deg: float) -> "CameraInfo":
+        """Square pixels, principal point at the image centre, horizontal field of view [deg]."""
+        f = (width / 2) / np.tan(np.radians(hfov_deg) / 2)
+        return CameraInfo(name, width, height, f, f, (width - 1) / 2, (height - 1) / 2)
+
 
 @dataclass(frozen=True, eq=False)
 class Frame:

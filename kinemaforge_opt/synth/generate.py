@@ -45,7 +45,7 @@ from .case import Case
 from .effects import MODEL_EFFECTS, true_model, unit_of
 from .groundtruth import Episode, axes_world, simulate
 from .objects import SynthObject, make_object, write_meshes
-from .render import LABEL_ENVIRONMENT, LABEL_FIRST_LINK, Intrinsics, SceneRenderer, look_at
+from .render import LABEL_ENVIRONMENT, LABEL_FIRST_LINK, SceneRenderer, look_at
 from .sensor import noisy_depth, noisy_rgb
 
 DEPTH_SCALE = 1000.0  # PNG value per metre (1 mm steps)
@@ -123,7 +123,7 @@ def scene_renderer(obj: SynthObject, episode: Episode) -> SceneRenderer:
                          wall_y=float(obj.meshes[obj.model.root.name].bounds[1][1]) + 0.3, fixed_links=fixed)
 
 
-def _write_view(renderer: SceneRenderer, intr: Intrinsics, frame: Frame, Ts_world_link: np.ndarray,
+def _write_view(renderer: SceneRenderer, intr: CameraInfo, frame: Frame, Ts_world_link: np.ndarray,
                 case: Case, seq: Path, gt: Path) -> None:
     """Render one view with the links at ``Ts_world_link`` (L, 4, 4), apply the sensor model and
     write the frame's RGB and depth PNGs under ``seq`` and its label PNG under ``gt``.  Each frame
@@ -136,7 +136,7 @@ def _write_view(renderer: SceneRenderer, intr: Intrinsics, frame: Frame, Ts_worl
     write_png(gt / "labels" / frame.camera / f"{frame.index:06d}.png", view.labels)
 
 
-def _write_views(renderer: SceneRenderer, intr: Intrinsics, frames: list[Frame], link_poses: list[np.ndarray],
+def _write_views(renderer: SceneRenderer, intr: CameraInfo, frames: list[Frame], link_poses: list[np.ndarray],
                  case: Case, seq: Path, gt: Path, workers: int) -> None:
     """:func:`_write_view` for every frame (with its (L, 4, 4) link poses) on ``workers`` threads
     (ray casting, numpy and PNG encoding release the GIL).  The first failure cancels the views
@@ -163,7 +163,7 @@ def generate_case(case: Case, out_dir: str | Path, workers: int | None = None) -
 
     idx = np.unique(np.round(np.linspace(0, len(episode.t) - 1, case.frames)).astype(int))
     times = episode.t[idx]
-    intr = Intrinsics.from_hfov(case.width, case.height, case.hfov_deg)
+    intr = CameraInfo.from_hfov("camera", case.width, case.height, case.hfov_deg)
     cams = camera_poses(obj, case, times)
     renderer = scene_renderer(obj, episode)
     frames: list[Frame] = []
@@ -174,7 +174,7 @@ def generate_case(case: Case, out_dir: str | Path, workers: int | None = None) -
             frames.append(Frame(len(frames), float(t), name, Ts_world_camera[k], rgb_path, depth_path))
             link_poses.append(episode.Ts_world_link[i])
     _write_views(renderer, intr, frames, link_poses, case, seq, gt, workers or os.cpu_count() or 1)
-    cameras = {name: CameraInfo(name, intr.width, intr.height, intr.fx, intr.fy, intr.cx, intr.cy) for name, _ in cams}
+    cameras = {name: dataclasses.replace(intr, name=name) for name, _ in cams}
     write_sequence_json(seq, cameras, frames, DEPTH_SCALE, obj.model.gravity)
     write_wrenches(seq / "wrenches.csv", Wrenches(episode.t, episode.grip_world, episode.force_world))
 

@@ -22,28 +22,11 @@ import open3d as o3d
 import trimesh
 
 from ..errors import ModelError
+from ..io.sequence import CameraInfo
 from ..spatial import normalize
 
 LABEL_NONE, LABEL_ENVIRONMENT, LABEL_FIRST_LINK = 0, 1, 2
 CAMERA_CACHE_SIZE = 8  # static-scene layers kept (one per camera pose; about 10 MB each at 640×480)
-
-
-@dataclass(frozen=True)
-class Intrinsics:
-    """Pinhole intrinsics: image size [px], focal lengths and principal point [px]."""
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-
-    @staticmethod
-    def from_hfov(width: int, height: int, hfov_deg: float) -> "Intrinsics":
-        """Square pixels, principal point at the image centre, horizontal field of view [deg]."""
-        f = (width / 2) / np.tan(np.radians(hfov_deg) / 2)
-        return Intrinsics(width, height, f, f, (width - 1) / 2, (height - 1) / 2)
 
 
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
@@ -120,7 +103,7 @@ class SceneRenderer:
         self._static_scene = _Scene(static)
         self._camera = functools.lru_cache(maxsize=CAMERA_CACHE_SIZE)(self._camera_rays)
 
-    def render(self, Ts_world_link: np.ndarray, intr: Intrinsics, T_world_camera: np.ndarray) -> RenderedView:
+    def render(self, Ts_world_link: np.ndarray, intr: CameraInfo, T_world_camera: np.ndarray) -> RenderedView:
         """Render the links at ``Ts_world_link`` (L, 4, 4) from a camera at ``T_world_camera``."""
         for i, T in self.fixed.items():
             if not np.allclose(Ts_world_link[i], T):
@@ -140,7 +123,7 @@ class SceneRenderer:
         depth = np.where(np.isfinite(t), t, np.float32(0.0))
         return RenderedView(depth.reshape(shape), labels.reshape(shape), rgb.reshape(shape + (3,)), cos.reshape(shape))
 
-    def _camera_rays(self, intr: Intrinsics, T_world_camera_bytes: bytes) -> _CameraRays:
+    def _camera_rays(self, intr: CameraInfo, T_world_camera_bytes: bytes) -> _CameraRays:
         """The rays of a camera pose (given as the bytes of its float64 (4, 4) T_world_camera, so
         that it can be a cache key) and their hits on the static scene."""
         T = np.frombuffer(T_world_camera_bytes, dtype=float).reshape(4, 4)
@@ -208,7 +191,7 @@ def _placed_vertices(mesh: trimesh.Trimesh, T_world_mesh: np.ndarray) -> np.ndar
     return (mesh.vertices @ T_world_mesh[:3, :3].T + T_world_mesh[:3, 3]).astype(np.float32)
 
 
-def _footprint(vertices_world: list[np.ndarray], intr: Intrinsics, T_world_camera: np.ndarray) -> np.ndarray:
+def _footprint(vertices_world: list[np.ndarray], intr: CameraInfo, T_world_camera: np.ndarray) -> np.ndarray:
     """(H, W) bool: the pixels whose rays can hit meshes with these (V, 3) world vertices — the
     union of the bounding rectangles of their projected vertices, 1 px wider (the whole image
     when a mesh reaches behind the camera)."""
@@ -228,7 +211,7 @@ def _footprint(vertices_world: list[np.ndarray], intr: Intrinsics, T_world_camer
 
 
 @functools.lru_cache(maxsize=16)
-def camera_rays(intr: Intrinsics) -> np.ndarray:
+def camera_rays(intr: CameraInfo) -> np.ndarray:
     """(H, W, 3) float32 ray directions in the camera frame with unit z (hit distance = z-depth);
     read-only, cached per intrinsics."""
     u, v = np.meshgrid(np.arange(intr.width, dtype=float), np.arange(intr.height, dtype=float))

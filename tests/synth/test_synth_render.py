@@ -6,10 +6,11 @@ import trimesh
 
 from kinemaforge_opt.errors import ModelError
 from kinemaforge_opt.spatial import inverse
-from kinemaforge_opt.synth.render import LABEL_ENVIRONMENT, LABEL_FIRST_LINK, Intrinsics, SceneRenderer, look_at
+from kinemaforge_opt.io.sequence import CameraInfo
+from kinemaforge_opt.synth.render import LABEL_ENVIRONMENT, LABEL_FIRST_LINK, SceneRenderer, look_at
 from kinemaforge_opt.synth.sensor import CLEAN, D435, noisy_depth, noisy_rgb
 
-INTR = Intrinsics.from_hfov(160, 120, 60.0)
+INTR = CameraInfo.from_hfov("cam0", 160, 120, 60.0)
 
 
 def box_renderer(wall_y=None):
