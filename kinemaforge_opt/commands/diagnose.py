@@ -1,4 +1,5 @@
-"""``kinemaforge diagnose MODEL.urdf RECORDING.csv -o OUT``: locate, explain, model, show."""
+"""``kinemaforge diagnose MODEL.urdf RECORDING.csv -o OUT`` or ``kinemaforge diagnose RECON_OUT
+--sequence SEQ -o OUT``: locate, explain, model, show."""
 
 from __future__ import annotations
 
@@ -13,11 +14,18 @@ what it does:
   3. re-fits with them and writes the augmented model;
   4. compares nominal vs augmented on the held-out last part of the recording and in Drake.
 
-outputs: OUT/diagnosis.json, OUT/model.urdf, OUT/residual_time.png, OUT/residual_state.png,
-         OUT/fit_before_after.png
+on a reconstruction (first argument = a folder written by `kinemaforge reconstruct SEQ -o R`):
+  the joint-space recording is built from it: q per time step from R/tracks.csv (the part
+  tracks, measured against the joint axes of R/model.urdf) and tau from SEQ/wrenches.csv mapped
+  to joint forces through the model (each contact given to the link that carries its point);
+  it is written to OUT/recording.csv, R/meshes is copied to OUT/meshes, then as above.
 
-example:
+outputs: OUT/diagnosis.json, OUT/model.urdf, OUT/residual_time.png, OUT/residual_state.png,
+         OUT/fit_before_after.png (+ OUT/recording.csv, OUT/meshes/ on a reconstruction)
+
+examples:
   kinemaforge diagnose models/furuta/furuta.urdf qube.csv -o out/qube
+  kinemaforge reconstruct seq -o out/rec && kinemaforge diagnose out/rec --sequence seq -o out/diag
 """
 
 
@@ -30,8 +38,12 @@ def register(sub) -> None:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("model", help="URDF of the nominal model")
-    p.add_argument("recording", help="recording.csv (t, q:<joint>, optional v:, tau:)")
+    p.add_argument("model", metavar="MODEL.urdf|RECON_OUT",
+                   help="URDF of the nominal model, or a `kinemaforge reconstruct` output folder")
+    p.add_argument("recording", nargs="?", metavar="RECORDING.csv",
+                   help="recording.csv (t, q:<joint>, optional v:, tau:); not with a reconstruction folder")
+    p.add_argument("--sequence", metavar="SEQ", default=None,
+                   help="the RGB-D sequence a reconstruction folder was made from (its wrenches.csv gives tau)")
     p.add_argument("-o", "--out", required=True, help="output folder")
     p.add_argument("--holdout", type=float, default=0.25, help="fraction held out at the end (default 0.25)")
     p.add_argument("--no-drift", action="store_true", help="skip the Drake drift comparison")
@@ -46,14 +58,12 @@ def run(args) -> int:
     from tqdm import tqdm
 
     from ..io.recording import read_recording
-    from ..model import read_urdf
     from ..physics.diagnose import diagnose
     from ..physics.report import write_diagnosis
 
     from ..nlp.joint_space import match_recording
 
-    model = read_urdf(args.model)
-    rec = read_recording(args.recording)
+    model, rec = _inputs(args)
     match_recording(model, rec)  # bad input fails before any work (and before the progress bar)
     bar = tqdm(desc="diagnose", unit="fit", leave=False)
 
@@ -71,3 +81,37 @@ def run(args) -> int:
     print(d.summary())
     print("wrote " + ", ".join(str(p) for p in paths.values()))
     return 0
+
+
+def _inputs(args):
+    """(model, recording) from MODEL.urdf + RECORDING.csv, or from a reconstruction folder + --sequence
+    (then OUT/recording.csv and OUT/meshes/ are written first)."""
+    import shutil
+    from pathlib import Path
+
+    from ..errors import InputFileError
+    from ..io.recording import read_recording, write_recording
+    from ..model import read_urdf
+
+    src = Path(args.model)
+    if not src.is_dir():
+        if args.sequence is not None:
+            raise InputFileError(f"--sequence goes with a reconstruction folder, but {str(src)!r} is not a folder")
+        if args.recording is None:
+            raise InputFileError(f"{src}: a URDF needs a RECORDING.csv (or give a reconstruction folder and --sequence SEQ)")
+        return read_urdf(src), read_recording(args.recording)
+    if args.recording is not None:
+        raise InputFileError(f"{src} is a reconstruction folder: give --sequence SEQ, not a recording "
+                             f"({args.recording!r})")
+    if args.sequence is None:
+        raise InputFileError(f"{src} is a reconstruction folder: --sequence SEQ (the RGB-D sequence it was made "
+                             "from) is required")
+    from ..verify.reconstruction import load_reconstruction, reconstruction_recording
+
+    model, doc = load_reconstruction(src)
+    jr = reconstruction_recording(src, args.sequence, model, doc)
+    out = Path(args.out)
+    write_recording(out / "recording.csv", jr.recording)
+    if (src / "meshes").is_dir() and src.resolve() != out.resolve():
+        shutil.copytree(src / "meshes", out / "meshes", dirs_exist_ok=True)
+    return model, jr.recording

@@ -111,10 +111,21 @@ def run(args) -> int:
 
 
 def _run_sequence(args) -> int:
+    from ..verify.reconstruction import verify_reconstruction
+
     rec = reconstruct_sequence(args.input, args.out, method=args.method, k_best=args.k_best, density=args.density)
     for j in rec.document["joints"]:
         print(f"{j['name']}: {j['type']} {j['parent']} -> {j['child']} axis {[round(a, 3) for a in j['axis_world']]} "
               f"(ρ = {j['confidence']:.2f})")
     print(f"wrote {args.out / 'reconstruction.json'}, model.urdf, meshes/, clouds.npz "
-          f"({rec.document['timing_s']['total']:.1f} s)")
+          f"({rec.document['timing_s']['total']:.1f} s)", flush=True)
+    if not rec.model.movable_joints:
+        print("verification skipped: the model has no movable joint")
+        return 0
+    v = verify_reconstruction(args.out, args.input, reconstruction=rec)
+    drift = ", ".join(f"{h} s: {d:.3g}" + ("*" if v["beyond_recording"][h] else "") for h, d in v["drift_m"].items())
+    print(f"Drake verification ({v['forcing']}): drift [m] {drift}; energy residual {v['energy_residual']:.3g} "
+          f"({v['timing_s']['total']:.1f} s)")
+    print(f"  * past the {v['recording_duration_s']:.1f} s recording: distance to its last pose, held")
+    print(f"wrote {args.out / 'recording.csv'}, tracks.csv, trajectories.png; verification in reconstruction.json")
     return 0

@@ -7,6 +7,9 @@ from pathlib import Path
 
 from ..errors import InputFileError, KinemaforgeError
 
+REPLAY_TAIL_S = 2.0
+"""How long past the recording's end the animation shows a stored replay [s]."""
+
 DESCRIPTION = """\
 Build a 3-D scene of an output folder and save it as OUT/scene.html, a single HTML file
 that opens in a browser without a server (meshcat viewer inlined).
@@ -16,8 +19,10 @@ sphere at each link's centre of mass), every joint axis as a yellow arrow and it
 an orange arc (revolute) or segment (prismatic).  When OUT holds a joint-space recording
 (OUT/recording.csv, else the first OUT/*.csv with q:<joint> columns for the model's joints)
 the scene animates the recorded motion and, in grey, the Drake replay of it from the same
-initial state under the recorded tau.  Point clouds, if OUT/clouds.npz exists (one (N, 3)
-array in metres per part, named by part), are drawn coloured by part.
+initial state under the recorded tau (OUT/replay.csv when the folder holds one, as
+`kinemaforge reconstruct` writes: the verified replay, shown until 2 s past the recording's end).
+Point clouds, if OUT/clouds.npz exists (one (N, 3) array in metres per part, named by part),
+are drawn coloured by part.
 """
 
 EPILOG = """\
@@ -55,6 +60,24 @@ def _find_recording(out: Path, model):
     return None
 
 
+def _replay(out: Path, model, rec):
+    """(t (T,) [s] from the recording's start, q (T, n)) of OUT/replay.csv, clipped to 2 s past the
+    recording's end, or None when there is no usable replay.csv."""
+    from ..io.recording import read_recording
+
+    path = out / "replay.csv"
+    if not path.is_file():
+        return None
+    try:
+        replay = read_recording(path).select(model.joint_names)
+    except KinemaforgeError:
+        return None
+    keep = replay.t <= rec.t[-1] + REPLAY_TAIL_S
+    if keep.sum() < 2:
+        return None
+    return replay.t[keep] - rec.t[0], replay.q[keep]
+
+
 def _clouds(out: Path) -> dict:
     import numpy as np
 
@@ -68,11 +91,12 @@ def _clouds(out: Path) -> dict:
         raise InputFileError(f"{path}: not a readable .npz of per-part (N, 3) point arrays ({e})") from None
 
 
-def run(args) -> int:
+def write_scene(out: str | Path, replay: bool = True) -> Path:
+    """Build the scene of the output folder ``out`` (see DESCRIPTION) and write OUT/scene.html."""
     from ..model import read_urdf
     from ..viz import build_view
 
-    out = Path(args.out)
+    out = Path(out)
     if not out.is_dir():
         raise InputFileError(f"output folder {str(out)!r} does not exist")
     model = read_urdf(out / "model.urdf")
@@ -80,7 +104,10 @@ def run(args) -> int:
     recorded = simulated = None
     if rec is not None:
         recorded = (rec.t - rec.t[0], rec.q)
-        if not args.no_replay:
+        stored = _replay(out, model, rec)
+        if stored is not None and replay:
+            simulated = stored
+        elif replay:
             from ..verify import simulate_at
             from ..verify.energy import recorded_velocity
 
@@ -88,5 +115,9 @@ def run(args) -> int:
                                rec if rec.tau is not None else None)
             simulated = (traj.t, traj.q)
     scene = build_view(model, mesh_dir=out, recorded=recorded, simulated=simulated, clouds=_clouds(out))
-    print(scene.save(out / "scene.html"))
+    return scene.save(out / "scene.html")
+
+
+def run(args) -> int:
+    print(write_scene(args.out, replay=not args.no_replay))
     return 0

@@ -59,13 +59,25 @@ def drift(
     horizons_s=DEFAULT_HORIZONS_S,
     discrete: bool = True,
     v_eps: float = V_EPS,
+    forcing: Recording | None = None,
 ) -> DriftReport:
     """Replay ``recording`` with ``model`` up to the longest horizon and measure the drift.
 
     Output samples are the recording's own times, plus each horizon, plus a grid at the
-    recording's median period beyond its end.  Raises :class:`DataError` naming the joints when
-    the recording's joints and the model's differ, or for non-positive horizons."""
+    recording's median period beyond its end.  forcing: optional recording whose ``tau`` is
+    applied instead of ``recording``'s (e.g. the applied force at a finer rate than the measured
+    q); it must start at the recording's first time.  Raises :class:`DataError` naming the
+    joints when the recording's joints and the model's differ, or for non-positive horizons."""
     rec = model_ordered(model, recording)
+    if forcing is not None:
+        forcing = model_ordered(model, forcing)
+        if forcing.tau is None:
+            raise DataError("the forcing recording has no tau:<joint> columns")
+        if abs(forcing.t[0] - rec.t[0]) > 1e-9:
+            raise DataError(f"the forcing starts at t = {forcing.t[0]:.6g} s but the recording at "
+                            f"t = {rec.t[0]:.6g} s; they must start together")
+    else:
+        forcing = rec if rec.tau is not None else None
     h = np.asarray(horizons_s, dtype=float).reshape(-1)
     if h.size == 0 or np.any(h <= 0) or not np.all(np.isfinite(h)):
         raise DataError(f"horizons_s must be positive finite seconds, got {list(horizons_s)}")
@@ -74,7 +86,7 @@ def drift(
     grid_beyond = np.arange(t_rec[-1], t_max, rec.dt)
     t_out = np.unique(np.concatenate([t_rec[t_rec <= t_max], h, grid_beyond, [t_max]]))
     v0 = recorded_velocity(rec)[0]
-    sim = simulate_at(model, rec.q[0], v0, t_out, rec if rec.tau is not None else None, discrete, v_eps)
+    sim = simulate_at(model, rec.q[0], v0, t_out, forcing, discrete, v_eps)
     q_ref = np.column_stack([np.interp(t_out, t_rec, rec.q[:, j]) for j in range(model.nq)])
 
     err_m = _link_point_error(model, sim.q, q_ref)

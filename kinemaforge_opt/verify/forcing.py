@@ -1,0 +1,287 @@
+"""From a reconstruction to a joint-space recording: joint values from part pose tracks, and the
+applied forces of ``wrenches.csv`` mapped to joint forces through the model.
+
+Joint values (:func:`joint_values`).  Each link of the model is followed by one *representative*
+pose track: of the tracks listed for it (``reconstruction.json`` ``links[].tracks``), the one
+observed most often (the first such in the list on ties); the root link stays at the world frame.
+The *zero step* s0 is the first time step at which every moving link's representative is
+observed (the reconstruction's convention: q = 0 there).  For a joint from parent P to child C,
+with T_world_P(t), T_world_C(t) the representatives' poses (identity for the root),
+
+    M(t) = T_world_P(t)⁻¹ T_world_C(t),    D(t) = M(t) M(s0)⁻¹   (the child's motion since s0,
+                                                                  expressed in P's track frame)
+    a_P = R_world_P(s0)ᵀ a_world                                 (the joint axis in that frame)
+    revolute / helical:  q(t) = log_SO(3)(R_D(t)) · a_P   (unwrapped over time)   [rad]
+    prismatic:           q(t) = p_D(t) · a_P                                        [m]
+
+with a_world the joint axis in the world at q = 0 (forward kinematics of the model).  Steps at
+which a joint's two tracks are not both observed are filled by linear interpolation in time (held
+at the ends) and reported.
+
+Joint forces (:func:`map_wrenches`).  A wrench row is a force f (N) at a world point p (m) but
+does not say which link it pushes.  The rows are cut into *contacts*: runs of non-zero force whose
+point moves less than :data:`CONTACT_JUMP_M` between rows.  Each contact is given to the link that
+carries its point best: the smallest ``spread + distance``, where spread is the RMS scatter of p
+expressed in the link's frame over the contact (a grip moves with its link: ~0 on the right link)
+and distance the median distance from p to the link's point cloud (when clouds are given; it
+decides when nothing moves).  Then τ(t) = J_p(q(t))ᵀ f(t), J_p the (3, n) Jacobian of the link's
+material point at p (Pinocchio, world-aligned), q(t) linearly interpolated from the joint values.
+
+The recording (:func:`joint_recording`) keeps the tracks' time steps (the q measured there) and
+gives each step the mean τ over the wrench rows closest to it (the midpoints to its neighbours
+bound the window), so the force's impulse survives a coarse visual rate; the full-rate τ is
+returned as well, for the Drake replay.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from ..errors import DataError
+from ..io.recording import Recording
+from ..io.sequence import Wrenches
+from ..io.tracks import PoseTracks
+from ..model import ArticulatedModel
+from ..model.pinocchio import build_pin_model
+
+CONTACT_JUMP_M = 0.05
+"""A wrench point moving further than this between two rows starts a new contact [m] (a hand
+moving 5 cm in one row at ≥ 30 Hz would be faster than 1.5 m/s: it let go and grabbed again)."""
+
+FORCE_EPS_N = 1e-9
+"""Rows whose force norm is at most this [N] apply nothing (they end a contact)."""
+
+
+@dataclass(frozen=True, eq=False)
+class JointValues:
+    """Joint values measured from pose tracks.
+
+    t: (T,) the tracks' times [s].  joint_names: the model's movable joints (q order).
+    q: (T, n) joint values [rad or m], q = 0 at the zero step.  observed: (T, n) bool, False
+    where the value was filled by interpolation.  zero_step: index of s0.
+    representatives: link name -> the track that follows it (None for the root)."""
+
+    t: np.ndarray
+    joint_names: tuple[str, ...]
+    q: np.ndarray
+    observed: np.ndarray
+    zero_step: int
+    representatives: dict[str, str | None]
+
+
+@dataclass(frozen=True, eq=False)
+class MappedWrenches:
+    """Wrench rows as joint forces.  t: (W,) [s]; tau: (W, n) [N·m or N];
+    link: (W,) the link each row pushes (None where the force is zero);
+    contacts: one (first row, last row, link) per contact."""
+
+    t: np.ndarray
+    tau: np.ndarray
+    link: np.ndarray
+    contacts: tuple[tuple[int, int, str], ...]
+
+
+@dataclass(frozen=True, eq=False)
+class JointRecording:
+    """recording: q at the tracks' steps and the windowed mean τ (module docs).
+    forcing: τ at the wrench rows (q interpolated there), for simulation; None without wrenches.
+    values, wrenches: the two stages' results."""
+
+    recording: Recording
+    forcing: Recording | None
+    values: JointValues
+    wrenches: MappedWrenches | None
+
+
+def _representative(tracks: PoseTracks, members: Sequence[str], link: str) -> int:
+    known = [m for m in members if m in tracks.names]
+    if not known:
+        raise DataError(f"link {link!r}: none of its tracks {list(members)} is in the tracks "
+                        f"(tracks: {', '.join(tracks.names)})")
+    obs = tracks.observed().sum(axis=1)
+    best = max(obs[tracks.names.index(m)] for m in known)
+    return next(tracks.names.index(m) for m in known if obs[tracks.names.index(m)] == best)
+
+
+def joint_values(model: ArticulatedModel, tracks: PoseTracks, link_tracks: Mapping[str, Sequence[str]]) -> JointValues:
+    """q per track time step for every movable joint of ``model`` (module docs).
+
+    link_tracks: link name -> the names of the tracks that move with it (the root's may be
+    omitted).  Raises :class:`DataError` naming the link or joint when a moving link has no
+    track, tracks have no orientation, no step sees every moving link, or a joint is seen at
+    fewer than two steps."""
+    if not tracks.has_orientation:
+        raise DataError("joint values need full-pose tracks (x,y,z,qx,qy,qz,qw); these are position-only")
+    root = model.root.name
+    moving = [j.child for j in model.joints]
+    reps: dict[str, int | None] = {root: None}
+    for link in moving:
+        if link not in link_tracks:
+            raise DataError(f"link {link!r} has no tracks listed; links with tracks: {', '.join(link_tracks)}")
+        reps[link] = _representative(tracks, link_tracks[link], link)
+    obs = tracks.observed()
+    T = tracks.times.size
+    seen = np.ones(T, dtype=bool)
+    for link in moving:
+        seen &= obs[reps[link]]
+    if not seen.any():
+        raise DataError("no time step sees every moving link's track at once; the zero configuration needs one")
+    s0 = int(np.argmax(seen))
+
+    def poses(link: str) -> tuple[np.ndarray, np.ndarray]:
+        k = reps.get(link)
+        if k is None:
+            return np.broadcast_to(np.eye(4), (T, 4, 4)), np.ones(T, dtype=bool)
+        return tracks.Ts_world_track(k), obs[k]
+
+    pm = build_pin_model(model, check_dynamics=False)
+    data = pm.createData()
+    pin.forwardKinematics(pm, data, np.zeros(model.nq))
+    q = np.zeros((T, model.nq))
+    observed = np.zeros((T, model.nq), dtype=bool)
+    for i, j in enumerate(model.movable_joints):
+        jid = pm.getJointId(j.name)
+        a_world = data.oMi[jid].rotation @ (np.asarray(j.axis, dtype=float) / np.linalg.norm(j.axis))
+        Tp, op = poses(j.parent)
+        Tc, oc = poses(j.child)
+        ok = op & oc
+        if ok.sum() < 2:
+            raise DataError(f"joint {j.name!r}: its parent {j.parent!r} and child {j.child!r} are seen together "
+                            f"at {int(ok.sum())} time step(s); at least 2 are needed")
+        idx = np.flatnonzero(ok)
+        M = np.linalg.inv(Tp[idx]) @ Tc[idx]
+        D = M @ np.linalg.inv(np.linalg.inv(Tp[s0]) @ Tc[s0])
+        a_P = Tp[s0][:3, :3].T @ a_world
+        if j.type == "prismatic":
+            qi = D[:, :3, 3] @ a_P
+        else:
+            qi = np.unwrap(Rotation.from_matrix(D[:, :3, :3]).as_rotvec() @ a_P)
+            qi -= 2 * np.pi * np.round(np.interp(s0, idx, qi) / (2 * np.pi))
+        q[:, i] = np.interp(np.arange(T), idx, qi)
+        observed[idx, i] = True
+    names = {link: (None if k is None else tracks.names[k]) for link, k in reps.items()}
+    return JointValues(tracks.times.copy(), model.joint_names, q, observed, s0, names)
+
+
+def _contacts(w: Wrenches) -> list[tuple[int, int]]:
+    """(first, last) row index of each run of non-zero force with a continuous point."""
+    active = np.linalg.norm(w.forces_world, axis=1) > FORCE_EPS_N
+    jump = np.r_[True, np.linalg.norm(np.diff(w.points_world, axis=0), axis=1) > CONTACT_JUMP_M]
+    out, start = [], None
+    for r in range(len(w.t)):
+        if start is not None and (not active[r] or jump[r]):
+            out.append((start, r - 1))
+            start = None
+        if active[r] and start is None:
+            start = r
+    if start is not None:
+        out.append((start, len(w.t) - 1))
+    return out
+
+
+def map_wrenches(
+    model: ArticulatedModel,
+    t_q: np.ndarray,
+    q: np.ndarray,
+    wrenches: Wrenches,
+    clouds_world: Mapping[str, np.ndarray] | None = None,
+) -> MappedWrenches:
+    """Joint forces τ (W, n) of the wrench rows (module docs).
+
+    t_q: (T,) [s] and q: (T, n) the joint values, interpolated linearly to the wrench times
+    (held outside).  clouds_world: optional link name -> (N, 3) points of the link at q = 0 [m]
+    (``clouds.npz``), used to tell links apart when the wrench point does not move."""
+    q = np.asarray(q, dtype=float).reshape(len(t_q), model.nq)
+    tw = np.asarray(wrenches.t, dtype=float)
+    qw = np.column_stack([np.interp(tw, t_q, q[:, k]) for k in range(model.nq)]) if model.nq else np.zeros((len(tw), 0))
+    pm = build_pin_model(model, check_dynamics=False)
+    data = pm.createData()
+    links = list(model.link_names)
+    fids = [pm.getFrameId(name) for name in links]
+    P, F = np.asarray(wrenches.points_world, dtype=float), np.asarray(wrenches.forces_world, dtype=float)
+    trees = {name: cKDTree(np.asarray(c, dtype=float)) for name, c in (clouds_world or {}).items()
+             if name in links and len(c)}
+    # every link's pose at q = 0 (the clouds' configuration) and at each row
+    T0 = {}
+    pin.framesForwardKinematics(pm, data, np.zeros(model.nq))
+    for name, fid in zip(links, fids):
+        T0[name] = data.oMf[fid].homogeneous.copy()
+    tau = np.zeros((len(tw), model.nq))
+    link_of = np.full(len(tw), None, dtype=object)
+    contacts = []
+    for first, last in _contacts(wrenches):
+        rows = np.arange(first, last + 1)
+        local = {name: np.empty((len(rows), 3)) for name in links}
+        for r_i, r in enumerate(rows):
+            pin.framesForwardKinematics(pm, data, qw[r])
+            for name, fid in zip(links, fids):
+                local[name][r_i] = data.oMf[fid].actInv(P[r])
+        score = {}
+        for name in links:
+            spread = float(np.sqrt(np.mean(np.sum((local[name] - local[name].mean(axis=0)) ** 2, axis=1))))
+            dist = 0.0
+            if name in trees:  # the point carried back to q = 0, against the link's cloud there
+                p0 = local[name] @ T0[name][:3, :3].T + T0[name][:3, 3]
+                dist = float(np.median(trees[name].query(p0)[0]))
+            score[name] = spread + dist
+        link = min(score, key=score.get)
+        fid = fids[links.index(link)]
+        for r in rows:
+            pin.computeJointJacobians(pm, data, qw[r])
+            pin.framesForwardKinematics(pm, data, qw[r])
+            J = pin.getFrameJacobian(pm, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            r_op = P[r] - data.oMf[fid].translation
+            J_p = J[:3] - pin.skew(r_op) @ J[3:]  # v_p = v_o + ω × (p − o)
+            tau[r] = J_p.T @ F[r]
+        link_of[rows] = link
+        contacts.append((int(first), int(last), link))
+    return MappedWrenches(tw, tau, link_of, tuple(contacts))
+
+
+def window_means(t_out: np.ndarray, t_in: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(T, k) mean of ``values`` (W, k) over the rows of ``t_in`` (W,) nearest each time of
+    ``t_out`` (T,): the window of t_out[i] runs between the midpoints to its neighbours (the ends
+    extend by half the first/last interval).  A window holding no row takes the value linearly
+    interpolated at t_out[i]."""
+    t_out = np.asarray(t_out, dtype=float)
+    mid = 0.5 * (t_out[1:] + t_out[:-1])
+    lo = np.r_[t_out[0] - (mid[0] - t_out[0]) if len(mid) else -np.inf, mid]
+    hi = np.r_[mid, t_out[-1] + (t_out[-1] - mid[-1]) if len(mid) else np.inf]
+    out = np.empty((len(t_out), values.shape[1]))
+    for i in range(len(t_out)):
+        m = (t_in >= lo[i]) & (t_in < hi[i])
+        if m.any():
+            out[i] = values[m].mean(axis=0)
+        else:
+            out[i] = [np.interp(t_out[i], t_in, values[:, k]) for k in range(values.shape[1])]
+    return out
+
+
+def joint_recording(
+    model: ArticulatedModel,
+    tracks: PoseTracks,
+    link_tracks: Mapping[str, Sequence[str]],
+    wrenches: Wrenches | None = None,
+    clouds_world: Mapping[str, np.ndarray] | None = None,
+) -> JointRecording:
+    """The joint-space recording of a reconstruction (module docs): q from ``tracks`` and, when
+    ``wrenches`` are given, τ from them; times start where the tracks start."""
+    values = joint_values(model, tracks, link_tracks)
+    if wrenches is None:
+        rec = Recording(values.t, values.joint_names, values.q)
+        return JointRecording(rec, None, values, None)
+    mapped = map_wrenches(model, values.t, values.q, wrenches, clouds_world)
+    tau = window_means(values.t, mapped.t, mapped.tau)
+    rec = Recording(values.t, values.joint_names, values.q, tau=tau)
+    # the forcing starts at the first track time (simulations start there)
+    tw = np.r_[values.t[0], mapped.t[mapped.t > values.t[0]]]
+    tau_w = np.column_stack([np.interp(tw, mapped.t, mapped.tau[:, k]) for k in range(model.nq)])
+    qw = np.column_stack([np.interp(tw, values.t, values.q[:, k]) for k in range(model.nq)])
+    forcing = Recording(tw, values.joint_names, qw, tau=tau_w) if len(tw) >= 2 else None
+    return JointRecording(rec, forcing, values, mapped)

@@ -1,0 +1,174 @@
+"""Drake verification of a reconstruction (the last stage of ``kinemaforge reconstruct``).
+
+The reconstructed model is replayed in Drake under the recording's forcing and compared with the
+motion the reconstruction measured:
+
+1. the joint-space recording of the reconstruction (:mod:`.forcing`): q at every time step of
+   the part tracks, τ from ``SEQ/wrenches.csv`` mapped to joint forces through the model (no
+   wrenches: no τ, a free response from the first measured state);
+2. the replay (:func:`.drift.drift`): Drake from the first measured q and finite-difference v,
+   under the full-rate τ, on the discrete 1 ms plant (joint limits enforced);
+3. drift at each horizon h = 1, 5, 10, 20, 50 s after the first time step: the largest distance
+   between where a moving link's origin or centre of mass is in the replay and where it is in
+   the measured motion.  **Past the end of the recording** (``beyond_recording``) the measured
+   motion is its last pose held and the replay keeps the last τ: the drift then says whether the
+   model comes to rest where the real object did, the only observation there is;
+4. the energy residual of the measured motion under the model (:func:`.energy.energy_residual`).
+
+Outputs in OUT: ``recording.csv`` (the joint-space recording, so ``diagnose`` and ``view`` can use
+it), ``replay.csv`` (the Drake replay, same time base, up to the longest horizon), ``tracks.csv``
+(when the tracks come from memory), ``trajectories.png``, and
+``reconstruction.json["verification"]`` = {"drift_m": {"1": …, "50": …}, "energy_residual": …,
+…} written atomically with the rest of the document.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputFileError
+from ..io.atomic import write_text_atomic
+from ..io.recording import Recording, write_recording
+from ..io.sequence import load_sequence
+from ..io.tracks import PoseTracks, read_tracks, write_tracks
+from ..model import ArticulatedModel, read_urdf
+from .drift import DEFAULT_HORIZONS_S, drift
+from .energy import energy_residual
+from .forcing import JointRecording, joint_recording
+from .plot import plot_trajectories
+
+DRIFT_DEFINITION = (
+    "max over moving links' origins and centres of mass of |p_replay(t0+h) - p_measured(t0+h)| [m]; "
+    "Drake replay from the first measured state under the recorded forcing; past the recording's end "
+    "the measured pose is its last one, held, and the last applied force is held"
+)
+
+
+def _key(h: float) -> str:
+    return f"{h:g}"
+
+
+def load_reconstruction(out: str | os.PathLike) -> tuple[ArticulatedModel, dict]:
+    """(model, reconstruction.json document) of a reconstruct output folder; the error names the
+    missing file."""
+    out = Path(out)
+    for name in ("model.urdf", "reconstruction.json"):
+        if not (out / name).is_file():
+            raise InputFileError(f"{out / name}: missing; {str(out)!r} is not the output of "
+                                 "`kinemaforge reconstruct SEQ -o OUT`")
+    try:
+        doc = json.loads((out / "reconstruction.json").read_text(encoding="utf-8"))
+    except json.JSONDecodeError as e:
+        raise InputFileError(f"{out / 'reconstruction.json'}: not valid JSON ({e})") from None
+    return read_urdf(out / "model.urdf"), doc
+
+
+def link_tracks(doc: dict, source: str = "reconstruction.json") -> dict[str, list[str]]:
+    """link name -> its track names, from the document's ``links[].tracks``."""
+    try:
+        return {link["name"]: list(link.get("tracks", ())) for link in doc["links"]}
+    except (KeyError, TypeError):
+        raise InputFileError(f"{source}: field 'links' must be a list of {{'name', 'tracks'}}") from None
+
+
+def load_clouds(out: str | os.PathLike) -> dict[str, np.ndarray]:
+    """OUT/clouds.npz as link name -> (N, 3) points [m] (empty if the file is absent)."""
+    path = Path(out) / "clouds.npz"
+    if not path.is_file():
+        return {}
+    try:
+        with np.load(path) as z:
+            return {k: z[k] for k in z.files}
+    except (OSError, ValueError) as e:
+        raise InputFileError(f"{path}: not a readable .npz of per-link (N, 3) point arrays ({e})") from None
+
+
+def reconstruction_recording(
+    out: str | os.PathLike,
+    sequence: str | os.PathLike,
+    model: ArticulatedModel | None = None,
+    doc: dict | None = None,
+    tracks: PoseTracks | None = None,
+    clouds: dict[str, np.ndarray] | None = None,
+) -> JointRecording:
+    """The joint-space recording of the reconstruction in ``out`` (:mod:`.forcing`), with τ from
+    ``sequence``/wrenches.csv.  Anything not given is read from ``out`` (model.urdf,
+    reconstruction.json, tracks.csv, clouds.npz)."""
+    out = Path(out)
+    if model is None or doc is None:
+        model, doc = load_reconstruction(out)
+    if tracks is None:
+        path = out / "tracks.csv"
+        if not path.is_file():
+            raise InputFileError(f"{path}: missing; the part tracks of the reconstruction are needed "
+                                 "(re-run `kinemaforge reconstruct SEQ -o OUT`, which writes them)")
+        tracks = read_tracks(path)
+    if clouds is None:
+        clouds = load_clouds(out)
+    seq = load_sequence(sequence)
+    return joint_recording(model, tracks, link_tracks(doc, str(out / "reconstruction.json")), seq.wrenches, clouds)
+
+
+def verify_reconstruction(
+    out: str | os.PathLike,
+    sequence: str | os.PathLike,
+    reconstruction=None,
+    horizons_s=DEFAULT_HORIZONS_S,
+    discrete: bool = True,
+) -> dict:
+    """Verify the reconstruction in ``out`` against ``sequence`` in Drake (module docs) and add the
+    result to OUT/reconstruction.json as ``verification``; returns that dict.
+
+    reconstruction: the in-memory :class:`~kinemaforge_opt.perception.reconstruct.Reconstruction`
+    (its model, document, tracks and clouds are used and OUT/tracks.csv is written), or None to
+    read everything from ``out``."""
+    start = time.perf_counter()
+    out = Path(out)
+    if reconstruction is not None:
+        model, doc = reconstruction.model, dict(reconstruction.document)
+        tracks, clouds = reconstruction.perception.tracks, reconstruction.clouds_world
+        write_tracks(out / "tracks.csv", tracks)
+    else:
+        model, doc = load_reconstruction(out)
+        tracks = clouds = None
+    jr = reconstruction_recording(out, sequence, model, doc, tracks, clouds)
+    rec = jr.recording
+    write_recording(out / "recording.csv", rec)
+    report = drift(model, rec, horizons_s, discrete=discrete, forcing=jr.forcing)
+    residual = energy_residual(model, rec)
+    sim = report.simulated
+    write_recording(out / "replay.csv", Recording(sim.t + rec.t[0], sim.joint_names, sim.q, sim.v))
+    plot_trajectories(out / "trajectories.png", report.simulated, rec.t - rec.t[0], rec.q,
+                      title=f"{model.name}: measured (dots) vs Drake replay")
+    result = {
+        "drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
+        "energy_residual": float(residual),
+        "drift_definition": DRIFT_DEFINITION,
+        "beyond_recording": {_key(h): bool(b) for h, b in zip(report.horizons_s, report.beyond_recording)},
+        "max_drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.max_drift_m)},
+        "joint_rms": {_key(h): float(d) for h, d in zip(report.horizons_s, report.joint_rms)},
+        "recording_duration_s": float(rec.t[-1] - rec.t[0]),
+        "zero_step_t_s": float(rec.t[jr.values.zero_step]),
+        "forcing": "wrenches.csv" if jr.forcing is not None else "none (free response)",
+        "contacts": [] if jr.wrenches is None else [
+            {"link": link, "t_s": [float(jr.wrenches.t[a]), float(jr.wrenches.t[b])]}
+            for a, b, link in jr.wrenches.contacts],
+        "interpolated_samples": {n: int((~jr.values.observed[:, i]).sum()) for i, n in enumerate(model.joint_names)},
+        "plant": "discrete_1ms" if discrete else "continuous",
+        "files": ["recording.csv", "replay.csv", "trajectories.png"],
+        "timing_s": {"replay": report.simulated.wall_time_s, "total": time.perf_counter() - start},
+    }
+    doc["verification"] = result
+    timing = dict(doc.get("timing_s", {}))
+    previous = float(timing.get("verify", 0.0))  # a re-run replaces the earlier verification
+    timing["verify"] = result["timing_s"]["total"]
+    if "total" in timing:
+        timing["total"] = float(timing["total"]) - previous + timing["verify"]
+    doc["timing_s"] = timing
+    write_text_atomic(out / "reconstruction.json", json.dumps(doc, indent=2))
+    return result

@@ -1,0 +1,117 @@
+"""Joint values from part tracks and wrenches mapped to joint forces, checked against MuJoCo's own
+joint record (the synthetic world's recording.csv: true q and the hand's J^T f from MuJoCo)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinemaforge_opt.errors import DataError
+from kinemaforge_opt.io.recording import read_recording
+from kinemaforge_opt.io.sequence import Wrenches, read_wrenches
+from kinemaforge_opt.io.tracks import PoseTracks, read_tracks
+from kinemaforge_opt.model import read_urdf
+from kinemaforge_opt.synth.case import Case
+from kinemaforge_opt.synth.effects import ConcealedEffect
+from kinemaforge_opt.synth.generate import generate_case
+from kinemaforge_opt.verify.forcing import joint_recording, joint_values, map_wrenches, window_means
+
+
+def small_case(category: str, effects=()) -> Case:
+    """24 time steps of one 3 s push-and-release stroke, rendered tiny (only tracks/wrenches are used)."""
+    return Case(f"small_{category}", category, 0, tuple(effects), views=1, frames=24, width=16, height=12)
+
+
+@pytest.fixture(scope="module")
+def door(tmp_path_factory):
+    return generate_case(small_case("cabinet", (ConcealedEffect("viscous_damping", "door_joint", 0.8),)),
+                         tmp_path_factory.mktemp("door"), workers=1)
+
+
+@pytest.fixture(scope="module")
+def drawer(tmp_path_factory):
+    return generate_case(small_case("drawer"), tmp_path_factory.mktemp("drawer"), workers=1)
+
+
+def _inputs(paths):
+    model = read_urdf(paths.model_urdf)
+    tracks = read_tracks(paths.tracks)
+    return model, tracks, {n: [n] for n in tracks.names}, read_wrenches(paths.sequence / "wrenches.csv")
+
+
+@pytest.mark.parametrize("which", ["door", "drawer"])
+def test_joint_values_and_forces_match_mujoco(which, request):
+    paths = request.getfixturevalue(which)
+    model, tracks, links, wrenches = _inputs(paths)
+    truth = read_recording(paths.recording)
+    jr = joint_recording(model, tracks, links, wrenches)
+    rec = jr.recording
+    q_true = np.column_stack([np.interp(rec.t, truth.t, truth.q[:, k]) for k in range(model.nq)])
+    q_true -= q_true[jr.values.zero_step]  # the reconstruction's q is 0 at the zero step
+    np.testing.assert_allclose(rec.q, q_true, atol=1e-9)
+    assert np.ptp(rec.q) > 0.05  # the joint really moved
+    # the hand's force mapped through Pinocchio = MuJoCo's J^T f, row by row
+    scale = np.abs(truth.tau).max()
+    assert scale > 1.0
+    np.testing.assert_allclose(jr.wrenches.tau, truth.tau, atol=1e-3 * scale)
+    moving = [j.child for j in model.movable_joints]
+    assert {link for _, _, link in jr.wrenches.contacts} <= set(moving) and jr.wrenches.contacts
+    # the windowed means keep the impulse of the push: ∫τ dt agrees to 5 % (the windows are half
+    # as wide at both ends, as the trapezoid rule weights them)
+    impulse_true = np.trapezoid(truth.tau[:, 0], truth.t)
+    impulse_rec = np.trapezoid(rec.tau[:, 0], rec.t)
+    assert impulse_rec == pytest.approx(impulse_true, rel=0.05)
+    # the full-rate forcing starts with the recording
+    assert jr.forcing.t[0] == rec.t[0]
+
+
+def test_window_means_are_means_over_the_nearest_rows():
+    t_in = np.arange(10) * 0.1
+    values = np.arange(10.0)[:, None]
+    out = window_means(np.array([0.0, 0.5, 0.9]), t_in, values)
+    # windows: [-0.25, 0.25) -> 0,1,2 ; [0.25, 0.7) -> 3..6 ; [0.7, 1.1) -> 7,8,9
+    np.testing.assert_allclose(out[:, 0], [1.0, 4.5, 8.0])
+
+
+def test_a_still_contact_goes_to_the_link_under_it(door):
+    """Nothing moves: the point's spread is zero on every link, the link's cloud decides."""
+    model, tracks, links, _ = _inputs(door)
+    p_door = np.array([0.3, -0.05, 0.4])
+    t = np.linspace(0, 1, 5)
+    w = Wrenches(t, np.tile(p_door, (5, 1)), np.tile([0.0, 5.0, 0.0], (5, 1)))
+    q = np.zeros((2, model.nq))
+    clouds = {"door": p_door[None, :] + 0.01, "body": np.array([[-1.0, 0.0, 0.0]])}
+    mapped = map_wrenches(model, np.array([0.0, 1.0]), q, w, clouds)
+    assert [c[2] for c in mapped.contacts] == ["door"]
+    clouds = {"door": np.array([[5.0, 5.0, 5.0]]), "body": p_door[None, :]}
+    mapped = map_wrenches(model, np.array([0.0, 1.0]), q, w, clouds)
+    assert [c[2] for c in mapped.contacts] == ["body"] and np.all(mapped.tau == 0)  # the base takes it
+
+
+def test_a_jump_or_a_pause_starts_a_new_contact(door):
+    model, *_ = _inputs(door)
+    t = np.arange(6) * 0.01
+    P = np.array([[0.3, 0, 0.4]] * 3 + [[0.3, 0.5, 0.4]] * 3)
+    F = np.tile([0.0, 1.0, 0.0], (6, 1))
+    F[4] = 0.0
+    mapped = map_wrenches(model, np.array([0.0, 1.0]), np.zeros((2, 1)), Wrenches(t, P, F))
+    assert [(a, b) for a, b, _ in mapped.contacts] == [(0, 2), (3, 3), (5, 5)]
+    assert np.all(mapped.tau[4] == 0)
+
+
+def test_errors_name_the_link_and_the_joint(door):
+    model, tracks, links, _ = _inputs(door)
+    with pytest.raises(DataError, match="link 'door' has no tracks listed"):
+        joint_values(model, tracks, {"body": ["body"]})
+    with pytest.raises(DataError, match=r"link 'door': none of its tracks \['ghost'\]"):
+        joint_values(model, tracks, {"body": ["body"], "door": ["ghost"]})
+    k = tracks.names.index("door")
+    P = tracks.positions.copy()
+    R = tracks.Rs_world_track.copy()
+    P[k, 1:] = np.nan
+    R[k, 1:] = np.nan
+    once = PoseTracks(tracks.times, tracks.names, P, R)
+    with pytest.raises(DataError, match="joint 'door_joint'.*1 time step"):
+        joint_values(model, once, links)
+    with pytest.raises(DataError, match="position-only"):
+        joint_values(model, PoseTracks(tracks.times, tracks.names, tracks.positions), links)
