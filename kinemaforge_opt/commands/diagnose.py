@@ -18,7 +18,9 @@ on a reconstruction (first argument = a folder written by `kinemaforge reconstru
   the joint-space recording is built from it: q per time step from R/tracks.csv (the part
   tracks, measured against the joint axes of R/model.urdf) and tau from SEQ/wrenches.csv mapped
   to joint forces through the model (each contact given to the link that carries its point);
-  it is written to OUT/recording.csv, R/meshes is copied to OUT/meshes, then as above.
+  it is written to OUT/recording.csv, R/meshes is copied to OUT/meshes, then as above, except
+  that the joints are searched without position limits (a reconstruction's limits are only the
+  observed range; a real stop in the data shows as limit_contact); OUT/model.urdf keeps them.
 
 outputs: OUT/diagnosis.json, OUT/model.urdf, OUT/residual_time.png, OUT/residual_state.png,
          OUT/fit_before_after.png (+ OUT/recording.csv, OUT/meshes/ on a reconstruction)
@@ -63,7 +65,12 @@ def run(args) -> int:
 
     from ..nlp.joint_space import match_recording
 
-    model, rec = _inputs(args)
+    model, rec, reconstructed = _inputs(args)
+    nominal = model
+    if reconstructed:  # its limits are the observed range, not known stops (verify.reconstruction.open_limits)
+        from ..verify.reconstruction import open_limits
+
+        model = open_limits(model)
     match_recording(model, rec)  # bad input fails before any work (and before the progress bar)
     bar = tqdm(desc="diagnose", unit="fit", leave=False)
 
@@ -77,6 +84,12 @@ def run(args) -> int:
     d = diagnose(model, rec, holdout_fraction=args.holdout, progress=progress, segment_s=args.segment,
                  other_recordings=others)
     bar.close()
+    if reconstructed:
+        import dataclasses
+
+        from ..verify.reconstruction import limits_from
+
+        d = dataclasses.replace(d, model=limits_from(d.model, nominal))
     paths = write_diagnosis(d, rec, args.out, with_drift=not args.no_drift)
     print(d.summary())
     print("wrote " + ", ".join(str(p) for p in paths.values()))
@@ -99,7 +112,7 @@ def _inputs(args):
             raise InputFileError(f"--sequence goes with a reconstruction folder, but {str(src)!r} is not a folder")
         if args.recording is None:
             raise InputFileError(f"{src}: a URDF needs a RECORDING.csv (or give a reconstruction folder and --sequence SEQ)")
-        return read_urdf(src), read_recording(args.recording)
+        return read_urdf(src), read_recording(args.recording), False
     if args.recording is not None:
         raise InputFileError(f"{src} is a reconstruction folder: give --sequence SEQ, not a recording "
                              f"({args.recording!r})")
@@ -114,4 +127,4 @@ def _inputs(args):
     write_recording(out / "recording.csv", jr.recording)
     if (src / "meshes").is_dir() and src.resolve() != out.resolve():
         shutil.copytree(src / "meshes", out / "meshes", dirs_exist_ok=True)
-    return model, jr.recording
+    return model, jr.recording, True

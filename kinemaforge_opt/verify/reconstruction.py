@@ -6,8 +6,10 @@ motion the reconstruction measured:
 1. the joint-space recording of the reconstruction (:mod:`.forcing`): q at every time step of
    the part tracks, τ from ``SEQ/wrenches.csv`` mapped to joint forces through the model (no
    wrenches: no τ, a free response from the first measured state);
-2. the replay (:func:`.drift.drift`): Drake from the first measured q and finite-difference v,
-   under the full-rate τ, on the discrete 1 ms plant (joint limits enforced);
+2. the replay (:func:`.drift.drift`): Drake from the first measured q, under the full-rate τ, on
+   the discrete 1 ms plant (joint limits enforced); the initial velocity is the one whose replay
+   best matches the first 0.5 s (:func:`.drift.fit_initial_velocity`: finite differences of q
+   at a visual rate are too coarse a velocity);
 3. drift at each horizon h = 1, 5, 10, 20, 50 s after the first time step: the largest distance
    between where a moving link's origin or centre of mass is in the replay and where it is in
    the measured motion.  **Past the end of the recording** (``beyond_recording``) the measured
@@ -37,7 +39,7 @@ from ..io.recording import Recording, write_recording
 from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks, read_tracks, write_tracks
 from ..model import ArticulatedModel, read_urdf
-from .drift import DEFAULT_HORIZONS_S, drift
+from .drift import DEFAULT_HORIZONS_S, drift, fit_initial_velocity
 from .energy import energy_residual
 from .forcing import JointRecording, joint_recording
 from .plot import plot_trajectories
@@ -139,7 +141,8 @@ def verify_reconstruction(
     jr = reconstruction_recording(out, sequence, model, doc, tracks, clouds)
     rec = jr.recording
     write_recording(out / "recording.csv", rec)
-    report = drift(model, rec, horizons_s, discrete=discrete, forcing=jr.forcing)
+    v0 = fit_initial_velocity(model, rec, jr.forcing, discrete=discrete)
+    report = drift(model, rec, horizons_s, discrete=discrete, forcing=jr.forcing, v0=v0)
     residual = energy_residual(model, rec)
     sim = report.simulated
     write_recording(out / "replay.csv", Recording(sim.t + rec.t[0], sim.joint_names, sim.q, sim.v))
@@ -154,6 +157,7 @@ def verify_reconstruction(
         "joint_rms": {_key(h): float(d) for h, d in zip(report.horizons_s, report.joint_rms)},
         "recording_duration_s": float(rec.t[-1] - rec.t[0]),
         "zero_step_t_s": float(rec.t[jr.values.zero_step]),
+        "v0": v0.tolist(),
         "forcing": "wrenches.csv" if jr.forcing is not None else "none (free response)",
         "contacts": [] if jr.wrenches is None else [
             {"link": link, "t_s": [float(jr.wrenches.t[a]), float(jr.wrenches.t[b])]}
@@ -172,3 +176,26 @@ def verify_reconstruction(
     doc["timing_s"] = timing
     write_text_atomic(out / "reconstruction.json", json.dumps(doc, indent=2))
     return result
+
+
+def open_limits(model: ArticulatedModel) -> ArticulatedModel:
+    """``model`` with every movable joint's position limits removed (effort and velocity kept).
+
+    A reconstruction's limits are the observed range of motion, not stops the object is known to
+    have: every joint reaches them by construction.  The mismatch discovery treats a declared stop
+    as nominal physics and stops reading the recording there, so it gets the joints unlimited
+    instead; a real stop in the data then shows as a ``limit_contact`` effect."""
+    from ..model import JointLimits
+
+    for j in model.movable_joints:
+        if j.limits is not None:
+            model = model.with_joint(j.name, limits=JointLimits(-np.inf, np.inf, j.limits.effort, j.limits.velocity))
+    return model
+
+
+def limits_from(model: ArticulatedModel, source: ArticulatedModel) -> ArticulatedModel:
+    """``model`` with the position limits of ``source``'s joints of the same names."""
+    for j in source.movable_joints:
+        if j.name in model.joint_names:
+            model = model.with_joint(j.name, limits=j.limits)
+    return model
