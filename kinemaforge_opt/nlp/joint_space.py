@@ -206,6 +206,7 @@ def build_joint_space_fit(
     substeps: int = 1,
     friction_eps: np.ndarray | float | None = None,
     segment_s: float | None = None,
+    limit_stops: dict[str, tuple[float, float]] | None = None,
 ) -> JointSpaceFit:
     """Build the fit of ``free`` parameters to ``recording`` (see the module docstring).
 
@@ -221,6 +222,8 @@ def build_joint_space_fit(
     segment_s: if given, the recording is cut into segments of this length [s], each starting from
     its own free initial state (no continuity across cuts): output-error fits of long oscillating
     recordings otherwise get trapped by phase drift (multiple shooting on a coarse grid).
+    limit_stops: per joint, (side, initial stop position) of the limit-contact effect (side +1:
+    a stop above the motion, -1: below); default :func:`limit_side`.
     """
     if energy not in ("soft", "hard", "off"):
         raise KinemaforgeError(f"energy must be 'soft', 'hard' or 'off', got {energy!r}")
@@ -245,6 +248,7 @@ def build_joint_space_fit(
         n[: -len("_ratio")] for n in free if n in ratio_names and n[: -len("_ratio")] not in free
     )
     dyn = build_dynamics(model, free=theta_names)
+    stop_side = {**limit_side(model, rec), **(limit_stops or {})}
     scales = data_scales(model, rec)
     n = model.nq
 
@@ -252,7 +256,7 @@ def build_joint_space_fit(
     phi_layout, phi_fixed = [], []
     for j in model.joint_names:
         nominal = nominal_force_parameters(model, j)
-        nominal["limit_stop"] = limit_side(model, rec)[j][1]
+        nominal["limit_stop"] = stop_side[j][1]
         for eff in effects[j]:
             for p in _EFFECT_PARAMS[eff]:
                 phi_layout.append((j, p))
@@ -267,13 +271,12 @@ def build_joint_space_fit(
             nominal = np.array([1.0])
         else:
             joint, field = name.rsplit(".", 1)
-            value = limit_side(model, rec)[joint][1] if field == "limit_stop" else nominal_force_parameters(model, joint)[field]
+            value = stop_side[joint][1] if field == "limit_stop" else nominal_force_parameters(model, joint)[field]
             nominal = np.array([value])
         blocks.append(make_block(model, name, nominal, scales))
     blocks = tuple(blocks)
 
     # --- symbolic interval function (SX) ---------------------------------------------------
-    stop_side = limit_side(model, rec)
     theta = ca.SX.sym("theta", dyn.theta0.size)
     phi = ca.SX.sym("phi", len(phi_layout))
     eps = friction_smoothing(rec) if friction_eps is None else np.broadcast_to(np.asarray(friction_eps, float), (n,))

@@ -108,12 +108,30 @@ class Problem:
         }
 
     # --- solve ----------------------------------------------------------------------------
+    def compile(self, max_iter: int = 500, tol: float = 1e-8, print_level: int = 0, options: dict | None = None) -> "CompiledProblem":
+        """Build the IPOPT solver once (casadi ``nlpsol``); the returned :class:`CompiledProblem`
+        solves it many times with other bounds, initial guesses or constraint bounds.  Variables
+        fixed by equal bounds are removed by IPOPT (``fixed_variable_treatment=make_parameter``),
+        so one compiled problem serves every subset of free parameters."""
+        return CompiledProblem(self, max_iter, tol, print_level, options)
+
     def solve(self, max_iter: int = 500, tol: float = 1e-8, print_level: int = 0, options: dict | None = None) -> Result:
         """Solve with IPOPT (MUMPS).  Returns a :class:`Result` whatever IPOPT's outcome."""
-        names = list(self._vars)
-        x = ca.vertcat(*[ca.vec(self._vars[n].symbol) for n in names])
-        f = sum(self._costs.values(), ca.MX(0))
-        cons = list(self._constraints.values())
+        return self.compile(max_iter, tol, print_level, options).solve()
+
+
+class CompiledProblem:
+    """A :class:`Problem` with its IPOPT solver built: ``solve`` may be called repeatedly with
+    per-variable overrides of ``init``, ``lower`` and ``upper`` (name -> value, shaped like the
+    variable) and per-constraint overrides of its bounds (``constraint_bounds``: name ->
+    (lower, upper)).  Build cost (symbolic derivatives) is paid once."""
+
+    def __init__(self, problem: Problem, max_iter: int, tol: float, print_level: int, options: dict | None):
+        self.problem = problem
+        self.names = list(problem._vars)
+        x = ca.vertcat(*[ca.vec(problem._vars[n].symbol) for n in self.names])
+        f = sum(problem._costs.values(), ca.MX(0))
+        cons = list(problem._constraints.values())
         g = ca.vertcat(*[c[0] for c in cons]) if cons else ca.MX(0, 1)
         opts = {
             "ipopt.max_iter": max_iter,
@@ -123,34 +141,58 @@ class Problem:
             "ipopt.sb": "yes",
         }
         opts.update(options or {})
-        solver = ca.nlpsol(self.name, "ipopt", {"x": x, "f": f, "g": g}, opts)
+        self.solver = ca.nlpsol(problem.name, "ipopt", {"x": x, "f": f, "g": g}, opts)
+        self.evaluate = ca.Function("terms", [x], list(problem._costs.values()) + [c[0] for c in cons])
+        self._slices, i = {}, 0
+        for n in self.names:
+            size = problem._vars[n].init.size
+            self._slices[n] = slice(i, i + size)
+            i += size
+        self._gslices, i = {}, 0
+        for n, c in problem._constraints.items():
+            self._gslices[n] = slice(i, i + c[0].numel())
+            i += c[0].numel()
+
+    def _vector(self, attr: str, override: dict | None) -> np.ndarray:
+        out = np.concatenate([getattr(self.problem._vars[n], attr) for n in self.names]) if self.names else np.zeros(0)
+        for n, value in (override or {}).items():
+            if n not in self._slices:
+                raise KinemaforgeError(f"problem {self.problem.name!r}: no variable {n!r}; variables: {', '.join(self.names)}")
+            sl = self._slices[n]
+            out[sl] = np.broadcast_to(np.asarray(value, dtype=float).reshape(-1, order="F"), (sl.stop - sl.start,))
+        return out
+
+    def solve(self, init: dict | None = None, lower: dict | None = None, upper: dict | None = None,
+              constraint_bounds: dict | None = None) -> Result:
+        """Solve from the declared guesses and bounds, with the given overrides."""
+        problem = self.problem
+        cons = problem._constraints
+        lbg = np.concatenate([c[1] for c in cons.values()]) if cons else np.zeros(0)
+        ubg = np.concatenate([c[2] for c in cons.values()]) if cons else np.zeros(0)
+        for n, (lo, hi) in (constraint_bounds or {}).items():
+            if n not in self._gslices:
+                raise KinemaforgeError(f"problem {problem.name!r}: no constraint {n!r}; constraints: {', '.join(cons)}")
+            lbg[self._gslices[n]], ubg[self._gslices[n]] = lo, hi
         start = time.perf_counter()
-        sol = solver(
-            x0=np.concatenate([self._vars[n].init for n in names]),
-            lbx=np.concatenate([self._vars[n].lower for n in names]),
-            ubx=np.concatenate([self._vars[n].upper for n in names]),
-            lbg=np.concatenate([c[1] for c in cons]) if cons else np.zeros(0),
-            ubg=np.concatenate([c[2] for c in cons]) if cons else np.zeros(0),
-        )
+        sol = self.solver(x0=self._vector("init", init), lbx=self._vector("lower", lower),
+                          ubx=self._vector("upper", upper), lbg=lbg, ubg=ubg)
         elapsed = time.perf_counter() - start
-        stats = solver.stats()
+        stats = self.solver.stats()
         xs = sol["x"].full().ravel()
-        values, i = {}, 0
-        for n in names:
-            shape = self._shapes[n]
-            size = shape[0] * shape[1]
-            values[n] = xs[i : i + size].reshape(shape, order="F")
+        values = {}
+        for n in self.names:
+            shape = problem._shapes[n]
+            values[n] = xs[self._slices[n]].reshape(shape, order="F")
             if shape[1] == 1:
                 values[n] = values[n][:, 0]
-            i += size
-        evaluate = ca.Function("terms", [x], list(self._costs.values()) + [c[0] for c in cons])
-        outs = evaluate(sol["x"])
+        outs = self.evaluate(sol["x"])
         outs = outs if isinstance(outs, (list, tuple)) else [outs]
-        costs = {n: float(o) for n, o in zip(self._costs, outs[: len(self._costs)])}
+        costs = {n: float(o) for n, o in zip(problem._costs, outs[: len(problem._costs)])}
         violations = {}
-        for (n, (_, lo, hi)), o in zip(self._constraints.items(), outs[len(self._costs) :]):
+        for n, o in zip(cons, outs[len(problem._costs) :]):
             val = o.full().ravel()
-            violations[n] = float(np.max(np.maximum(lo - val, val - hi), initial=0.0))
+            sl = self._gslices[n]
+            violations[n] = float(np.max(np.maximum(lbg[sl] - val, val - ubg[sl]), initial=0.0))
         return Result(
             success=bool(stats.get("success", False)),
             status=str(stats.get("return_status", "unknown")),

@@ -26,9 +26,10 @@ from ..calibration import Calibration, calibrate
 from ..errors import DataError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
-from ..nlp.joint_space import match_recording, noise_std
+from ..nlp.joint_space import build_joint_space_fit, match_recording, noise_std, velocity_estimate
 from .effects import EFFECTS
-from .locate import JointMismatch, locate
+from .locate import JointMismatch, inverse_dynamics_residual, locate
+from .search import HypothesisFit, Trial
 
 DELTA_BIC = -10.0
 # An accepted effect must also matter: it must move the fitted trajectory by at least this RMS,
@@ -139,9 +140,52 @@ def _free_for(model: ArticulatedModel, joint: str, effect: str) -> list[str]:
     return [f"{joint}.{p}" for p in EFFECTS[effect].params]
 
 
-def _reaches_limit(mismatch: tuple[JointMismatch, ...], joint: str) -> bool:
-    """Only joints whose recording comes near a stop are tested for limit contact."""
-    return any(m.joint == joint and "near limit" in m.regions for m in mismatch)
+def delta_bic_q(q_richer: np.ndarray, q_simpler: np.ndarray, q_rec: np.ndarray, extra_params: int,
+                sigma_q: np.ndarray) -> float:
+    """BIC(richer) - BIC(simpler) of two fitted trajectories (T, n) of the recording ``q_rec``
+    (see :func:`delta_bic`)."""
+    rss1 = float(np.sum(((q_richer - q_rec) / sigma_q) ** 2))
+    rss0 = float(np.sum(((q_simpler - q_rec) / sigma_q) ** 2))
+    n = q_rec.size
+    return float(n * np.log(rss1 / rss0) + extra_params * np.log(n))
+
+
+def limit_stop_guess(model: ArticulatedModel, rec: Recording) -> dict[str, tuple[float, float]]:
+    """Per joint, the side (+1 above the motion, -1 below) and initial position of a hypothetical
+    stop: the recorded extreme at which the nominal inverse-dynamics residual force pushes back
+    hardest (a stop is where the motion turns with a force the model lacks)."""
+    force, q, _, _ = inverse_dynamics_residual(model, rec)
+    out = {}
+    for k, j in enumerate(model.joint_names):
+        lo, hi = float(rec.q[:, k].min()), float(rec.q[:, k].max())
+        band = 0.03 * max(hi - lo, 1e-12)
+        up = -float(np.mean(force[rec.q[:, k] >= hi - band, k]))
+        down = float(np.mean(force[rec.q[:, k] <= lo + band, k]))
+        out[j] = (1.0, hi) if up >= down else (-1.0, lo)
+    return out
+
+
+def _at_bound_values(trial: Trial, names: list[str]) -> bool:
+    """True when the effect's reported parameter sits at its physical lower bound (zero)."""
+    name = names[0]
+    if name.endswith((".axis", ".inertia_ratio", ".spring_rest", ".bias")):
+        return False
+    return bool(abs(trial.z[name][0]) <= 1e-6)
+
+
+def _calibration(model: ArticulatedModel, rec: Recording, trial: Trial, effects: list[tuple[str, str]],
+                 stops: dict, segment_s: float | None, sigma_q: np.ndarray) -> Calibration:
+    """A :class:`Calibration` of ``model`` with the parameters of ``effects`` at the values of
+    ``trial`` (95 % intervals from the fit's sensitivity)."""
+    from ..calibration import _result
+    from ..nlp.problem import Result
+
+    names = [n for j, e in effects for n in _free_for(model, j, e)]
+    fit = build_joint_space_fit(model, rec, names, energy="off", segment_s=segment_s, limit_stops=stops,
+                                sigma_q=sigma_q)
+    z = np.concatenate([trial.z[b.name] for b in fit.blocks]) if fit.blocks else np.zeros(0)
+    res = Result(trial.success, trial.status, trial.iterations, float("nan"), {}, {}, {}, trial.solve_time_s)
+    return _result(fit, res, trial.X, z, trial.solve_time_s)
 
 
 def _n_params(names: list[str]) -> int:
@@ -191,46 +235,66 @@ def diagnose(
     sigma_q = noise_std(fit_rec.q)
 
     say("fitting the nominal model")
-    nominal = calibrate(model, fit_rec, free=[], segment_s=segment_s)
+    stops = limit_stop_guess(model, fit_rec)
+    hyps = [(j, e) for j in model.joint_names for e in candidates if e != "axis_tilt"]
+    search = {"base": HypothesisFit(model, fit_rec, hyps, segment_s, stops, CANDIDATE_MAX_ITER, sigma_q)}
+
+    def fit_for(effects_: list[tuple[str, str]]) -> HypothesisFit:
+        if not any(e == "axis_tilt" for _, e in effects_):
+            return search["base"]
+        if "axis" not in search:  # the symbolic axis makes every evaluation ~10x dearer: build on demand
+            search["axis"] = HypothesisFit(model, fit_rec, hyps + [(j, "axis_tilt") for j in model.joint_names
+                                                                   if "axis_tilt" in candidates],
+                                           segment_s, stops, CANDIDATE_MAX_ITER, sigma_q)
+        return search["axis"]
+
+    nominal_trial = search["base"].solve([])
+    nominal = _calibration(model, fit_rec, nominal_trial, [], stops, segment_s, sigma_q)
     mismatch = locate(model, fit_rec, nominal.q_fit, sigma_q)
+    v_scale = np.sqrt(np.mean(velocity_estimate(fit_rec) ** 2, axis=0))
+
+    def trial_of(selected_: list[tuple[str, str]], start: Trial) -> Trial:
+        names = [n for j, e in selected_ for n in _free_for(model, j, e)]
+        init = {}
+        for j, e in selected_:
+            if e == "stribeck_friction":  # a data-derived speed scale: a fifth of the RMS speed
+                init[f"{j}.v_stribeck"] = np.array([0.2 * v_scale[model.joint_index(j)]])
+            if e == "limit_contact":  # start in contact, 5 % of the range before the extreme, with a stiffness
+                # whose force over that penetration is the recording's force scale
+                k = model.joint_index(j)
+                span = float(np.ptp(fit_rec.q[:, k]))
+                init[f"{j}.limit_stop"] = np.array([stops[j][1] - stops[j][0] * 0.05 * span])
+                init[f"{j}.limit_stiffness"] = fit_for([(j, e)]).blocks[f"{j}.limit_stiffness"].scale * 0.01 * float(np.std(fit_rec.q[:, k])) / (0.05 * span)
+        contact = selected_[-1][1] == "limit_contact"  # a stop acts where the data went, not the parent fit
+        return fit_for(selected_).solve(names, start=start, init=init, states_from_data=contact)
 
     selected: list[tuple[str, str, float]] = []  # (joint, effect, delta_bic)
-    free: list[str] = []
-    effects: dict[str, tuple[str, ...]] = {}
     tested: list[dict] = []
-    current = nominal
+    current = nominal_trial
     for _ in range(max_effects):
         best = None
         for joint in model.joint_names:
             for effect in candidates:
                 if any(s[:2] == (joint, effect) for s in selected):
                     continue
-                if effect == "limit_contact" and not _reaches_limit(mismatch, joint):
-                    continue
-                names = _free_for(model, joint, effect)
-                eff = dict(effects)
-                if effect in ("axis_tilt", "inertia_error"):
-                    trial_eff = eff
-                else:
-                    trial_eff = {**eff, joint: eff.get(joint, ()) + (effect,)}
                 say(f"testing {effect} on {joint}")
-                cal = calibrate(model, fit_rec, free=free + names, effects=trial_eff, segment_s=segment_s,
-                                max_iter=CANDIDATE_MAX_ITER)
-                d = delta_bic(cal, current, _n_params(names), sigma_q)
-                size = float(np.sqrt(np.mean(((cal.q_fit - current.q_fit) / sigma_q) ** 2)))
-                supported = cal.success and not _at_bound(cal, names) and size >= MIN_EFFECT_SIZE_SIGMA
+                trial = trial_of([s[:2] for s in selected] + [(joint, effect)], current)
+                names = _free_for(model, joint, effect)
+                d = delta_bic_q(trial.q_fit, current.q_fit, fit_rec.q, _n_params(names), sigma_q)
+                size = float(np.sqrt(np.mean(((trial.q_fit - current.q_fit) / sigma_q) ** 2)))
+                supported = trial.success and not _at_bound_values(trial, names) and size >= MIN_EFFECT_SIZE_SIGMA
                 tested.append({"joint": joint, "type": effect, "delta_bic": d, "effect_size_sigma": size,
-                               "supported": supported})
+                               "supported": supported, "iterations": trial.iterations})
                 if supported and (best is None or d < best[2]):
-                    best = (joint, effect, d, names, trial_eff, cal)
+                    best = (joint, effect, d, trial)
         if best is None or best[2] >= DELTA_BIC:
             break
-        joint, effect, d, names, effects, current = best
-        free += names
+        joint, effect, d, current = best
         selected.append((joint, effect, d))
         say(f"selected {effect} on {joint} (ΔBIC {d:.0f})")
 
-    final = current
+    say("re-fitting with the selected effects")
+    final = _calibration(model, fit_rec, current, [s[:2] for s in selected], stops, segment_s, sigma_q)
     found = []
     for joint, effect, d in selected:
         names = _free_for(model, joint, effect)

@@ -1,0 +1,311 @@
+"""One NLP for every hypothesis of a recording.
+
+Forward selection tests many hypotheses (nominal model + a set of effects) on the same
+recording.  Building a CasADi/IPOPT solver (symbolic derivatives, sparsity) costs as much as
+solving it, so :class:`HypothesisFit` builds the joint-space collocation fit once with the
+parameters of *every* candidate effect present, and tests a hypothesis by fixing the parameters
+of the effects it leaves out at their nominal values (equal bounds: IPOPT removes fixed
+variables, ``fixed_variable_treatment=make_parameter``).  At its nominal value every effect
+parameter switches its effect off (zero coefficient, unit inertia ratio, nominal axis), so a
+fixed-out effect is exactly absent.  Each solve is warm-started from the parent hypothesis.
+
+The fit uses no energy term (``energy="off"``): the collocation defects already impose the
+dynamics, and the windowed energy penalty couples every sample of a window in the Hessian.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..io.recording import Recording
+from ..model.articulated import ArticulatedModel
+from ..nlp.joint_space import build_joint_space_fit
+from .effects import EFFECTS
+
+EXPAND = True
+
+
+def effect_parameters(model: ArticulatedModel, joint: str, effect: str) -> list[str]:
+    """The parameter names freed to test ``effect`` on ``joint`` (first = reported value)."""
+    if effect == "inertia_error":
+        return [f"{model.joint(joint).child}.inertia_ratio"]
+    return [f"{joint}.{p}" for p in EFFECTS[effect].params]
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One solved hypothesis.  free: its free parameter names.  values: physical value of every
+    parameter block of the shared fit (fixed ones at nominal).  q_fit: (T, n) fitted positions
+    at the samples.  X: (2n, G) collocation states, z: scaled parameters (warm start)."""
+
+    free: tuple[str, ...]
+    values: dict[str, np.ndarray]
+    q_fit: np.ndarray
+    X: np.ndarray
+    z: dict[str, np.ndarray]
+    success: bool
+    status: str
+    iterations: int
+    solve_time_s: float
+
+
+def _ccs_order(rows: np.ndarray, cols: np.ndarray, nrow: int) -> np.ndarray:
+    return np.lexsort((rows, cols))
+
+
+class _StructuredNLP:
+    """The collocation fit of a :class:`~kinemaforge_opt.nlp.joint_space.JointSpaceFit` as an
+    IPOPT problem whose constraint Jacobian and Lagrangian Hessian are assembled from per-interval
+    derivatives (symbolic, small) evaluated by ``map`` and scattered into the sparse global
+    matrices, instead of differentiating the whole mapped graph: the build cost no longer grows
+    with the number of samples, and each evaluation is one vectorised call.
+
+    Decision vector w = (vec(X), z): X (2n, G) collocation states column-major, z the scaled
+    parameters of every block in ``fit.blocks`` order.  Constraints: the kept Hermite–Simpson
+    defects (interval order), then |axis|² - 1 per free-axis block.  Objective: the noise-
+    normalised squared output error at the samples, averaged over samples (as ``output_q``)."""
+
+    def __init__(self, fit, max_iter: int, tol: float = 1e-8, print_level: int = 0):
+        import casadi as ca
+
+        rec = fit.recording
+        n = fit.model.nq
+        nx = 2 * n
+        m = fit.substeps
+        t_grid = np.concatenate([np.linspace(a, b, m + 1)[:-1] for a, b in zip(rec.t[:-1], rec.t[1:])] + [rec.t[-1:]])
+        G = t_grid.size
+        T = rec.t.size
+        self.n, self.nx, self.G, self.m = n, nx, G, m
+        self.blocks = fit.blocks
+        offs, o = {}, 0
+        for b in fit.blocks:
+            offs[b.name] = o
+            o += b.size
+        nz = o
+        self.z_offsets = offs
+        self.nz = nz
+        nw = nx * G + nz
+
+        # theta and phi as (linear) functions of z
+        zs = ca.SX.sym("z", nz)
+        byname = {b.name: b for b in fit.blocks}
+        theta_parts = []
+        for name in fit.theta_names:
+            if name in byname:
+                b = byname[name]
+                theta_parts.append(zs[offs[name]: offs[name] + b.size] * b.scale)
+            else:
+                r = name + "_ratio"
+                theta_parts.append(zs[offs[r]] * fit.dynamics.parameter(name).nominal)
+        theta = ca.vertcat(*theta_parts) if theta_parts else ca.SX(0, 1)
+        phi_parts = []
+        for i in range(len(fit.phi_layout)):
+            if i in fit.phi_free:
+                name, k = fit.phi_free[i]
+                phi_parts.append(zs[offs[name] + k] * byname[name].scale[k])
+            else:
+                phi_parts.append(ca.SX(fit.phi_fixed[i]))
+        phi = ca.vertcat(*phi_parts) if phi_parts else ca.SX(0, 1)
+
+        xk, xk1 = ca.SX.sym("xk", nx), ca.SX.sym("xk1", nx)
+        uk, uk1, h = ca.SX.sym("uk", n), ca.SX.sym("uk1", n), ca.SX.sym("h")
+        lam = ca.SX.sym("lam", nx)
+        d = fit.defect(xk, xk1, uk, uk1, h, theta, phi)[0]
+        wk = ca.vertcat(xk, xk1, zs)
+        nb = 2 * nx + nz
+        J = ca.densify(ca.jacobian(d, wk))
+        H = ca.densify(ca.hessian(ca.dot(lam, d), wk)[0])
+        f_d = ca.Function("d", [xk, xk1, uk, uk1, h, zs], [d], {"cse": True})
+        f_j = ca.Function("j", [xk, xk1, uk, uk1, h, zs], [J], {"cse": True})
+        f_h = ca.Function("h", [xk, xk1, uk, uk1, h, zs, lam], [H], {"cse": True})
+        self.sizes = (f_d.n_instructions(), f_j.n_instructions(), f_h.n_instructions())
+
+        U = np.array([np.interp(t_grid, rec.t, c) for c in rec.tau.T]) if rec.tau is not None else np.zeros((n, G))
+        Hs = np.diff(t_grid)
+        cut = set(range(G - 1)) - set(range(G - 1))
+        if len(fit.segment_starts) > 1:
+            cut = {c - 1 for c in fit.segment_starts[1:]}
+        kept = np.array([k for k in range(G - 1) if k not in cut], dtype=int)
+        K = kept.size
+
+        w = ca.MX.sym("w", nw)
+        X = ca.reshape(w[: nx * G], nx, G)
+        z = w[nx * G:]
+        Xa, Xb = X[:, kept.tolist()], X[:, (kept + 1).tolist()]
+        Ua, Ub, Hh = U[:, kept], U[:, kept + 1], Hs[kept][None, :]
+        D = f_d.map(K)(Xa, Xb, Ua, Ub, Hh, z)
+        axis_blocks = [b for b in fit.blocks if b.name.endswith(".axis")]
+        g_parts = [ca.vec(D)]
+        for b in axis_blocks:
+            za = z[offs[b.name]: offs[b.name] + 3]
+            g_parts.append(ca.sumsqr(za) - 1.0)
+        g = ca.vertcat(*g_parts)
+        ng = nx * K + len(axis_blocks)
+        self.ng = ng
+        self.axis_rows = {b.name: nx * K + i for i, b in enumerate(axis_blocks)}
+
+        sigma = fit.sigma_q
+        sample_cols = np.arange(0, G, m)
+        Qs = X[:n, sample_cols.tolist()]
+        f = ca.sumsqr((Qs - rec.q.T) / sigma[:, None]) / T
+
+        # --- Jacobian of g: per kept interval a dense (nx, nb) block ---------------------------
+        def wcols(k):  # global columns of w_k = (x_k, x_k+1, z)
+            return np.concatenate([np.arange(nx * k, nx * (k + 1)), np.arange(nx * (k + 1), nx * (k + 2)),
+                                   nx * G + np.arange(nz)])
+
+        rows, cols = [], []
+        for i, k in enumerate(kept):
+            c = wcols(k)
+            rr = nx * i + np.arange(nx)
+            rows.append(np.repeat(rr[None, :], nb, axis=0).T.ravel(order="F"))  # column-major of (nx, nb)
+            cols.append(np.repeat(c[None, :], nx, axis=0).ravel(order="F"))
+        jr = np.concatenate(rows) if rows else np.zeros(0, int)
+        jc = np.concatenate(cols) if cols else np.zeros(0, int)
+        Jall = ca.vec(f_j.map(K)(Xa, Xb, Ua, Ub, Hh, z))  # (nx*nb*K,) column-major per block
+        extra_r, extra_c, extra_v = [], [], []
+        for b in axis_blocks:
+            r = self.axis_rows[b.name]
+            for i in range(3):
+                extra_r.append(r)
+                extra_c.append(nx * G + offs[b.name] + i)
+                extra_v.append(2 * z[offs[b.name] + i])
+        jr = np.concatenate([jr, np.array(extra_r, int)])
+        jc = np.concatenate([jc, np.array(extra_c, int)])
+        jv = ca.vertcat(Jall, *extra_v) if extra_v else Jall
+        order = np.lexsort((jr, jc))
+        sp_j = ca.Sparsity.triplet(ng, nw, jr[order].tolist(), jc[order].tolist())
+        jac = ca.MX(sp_j, jv[order.tolist()])
+
+        # --- Hessian of the Lagrangian, upper triangle, duplicates summed ----------------------
+        lam_f = ca.MX.sym("lam_f")
+        lam_g = ca.MX.sym("lam_g", ng)
+        Lk = ca.reshape(lam_g[: nx * K], nx, K)
+        Hall = ca.vec(f_h.map(K)(Xa, Xb, Ua, Ub, Hh, z, Lk))  # (nb*nb*K,)
+        hr, hc = [], []
+        for k in kept:
+            c = wcols(k)
+            hr.append(np.repeat(c[None, :], nb, axis=0).T.ravel(order="F"))
+            hc.append(np.repeat(c[None, :], nb, axis=0).ravel(order="F"))
+        hr = np.concatenate(hr) if hr else np.zeros(0, int)
+        hc = np.concatenate(hc) if hc else np.zeros(0, int)
+        vals = [Hall]
+        # objective: 2/(sigma^2 T) on the sampled q entries
+        obj_idx = np.array([nx * c + j for c in sample_cols for j in range(n)], dtype=int)
+        obj_w = np.array([2.0 / (sigma[j] ** 2 * T) for c in sample_cols for j in range(n)])
+        hr = np.concatenate([hr, obj_idx])
+        hc = np.concatenate([hc, obj_idx])
+        vals.append(lam_f * ca.DM(obj_w))
+        for b in axis_blocks:
+            idx = nx * G + offs[b.name] + np.arange(3)
+            hr = np.concatenate([hr, idx])
+            hc = np.concatenate([hc, idx])
+            vals.append(2 * lam_g[self.axis_rows[b.name]] * ca.DM.ones(3))
+        hv = ca.vertcat(*vals)
+        upper = hr <= hc
+        hr, hc = hr[upper], hc[upper]
+        src = np.flatnonzero(upper)
+        key = hc.astype(np.int64) * nw + hr
+        uniq, inv = np.unique(key, return_inverse=True)
+        import scipy.sparse as sps
+
+        S = sps.csc_matrix((np.ones(src.size), (inv, src)), shape=(uniq.size, hv.numel()))
+        S_dm = ca.DM(ca.Sparsity(S.shape[0], S.shape[1], S.indptr.tolist(), S.indices.tolist()), S.data)
+        sp_h = ca.Sparsity.triplet(nw, nw, (uniq % nw).tolist(), (uniq // nw).tolist())
+        hess = ca.MX(sp_h, ca.mtimes(S_dm, hv))
+
+        p = ca.MX.sym("p", 0)
+        jac_fn = ca.Function("nlp_jac_g", [w, p], [g, jac], ["x", "p"], ["g", "jac_g_x"])
+        hess_fn = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"],
+                              ["triu_hess_gamma_x_x"])
+        opts = {"ipopt.max_iter": max_iter, "ipopt.tol": tol, "ipopt.print_level": print_level, "print_time": False,
+                "ipopt.sb": "yes", "jac_g": jac_fn, "hess_lag": hess_fn}
+        self.solver = ca.nlpsol("hypotheses", "ipopt", {"x": w, "f": f, "g": g}, opts)
+        self.fit = fit
+
+
+class HypothesisFit:
+    """The shared fit of ``recording`` for the (joint, effect) pairs in ``hypotheses``.
+
+    Build once (``__init__``), then :meth:`solve` any subset of their parameters.
+    limit_stops: per joint (side, initial stop) for ``limit_contact`` (see
+    :func:`kinemaforge_opt.nlp.joint_space.build_joint_space_fit`).
+    """
+
+    def __init__(self, model: ArticulatedModel, recording: Recording, hypotheses: list[tuple[str, str]],
+                 segment_s: float | None = None, limit_stops: dict | None = None, max_iter: int = 100,
+                 sigma_q: np.ndarray | None = None):
+        names: list[str] = []
+        for joint, effect in hypotheses:
+            for n in effect_parameters(model, joint, effect):
+                if n not in names:
+                    names.append(n)
+        self.model = model
+        self.names = tuple(names)
+        self.fit = build_joint_space_fit(model, recording, self.names, energy="off", segment_s=segment_s,
+                                         limit_stops=limit_stops, sigma_q=sigma_q)
+        self.blocks = {b.name: b for b in self.fit.blocks}
+        self.nlp = _StructuredNLP(self.fit, max_iter)
+        self.recording = self.fit.recording
+        rec = self.recording
+        n = model.nq
+        v0 = np.gradient(rec.q, rec.t, axis=0) if rec.v is None else rec.v
+        t_grid = np.concatenate([np.linspace(a, b, self.fit.substeps + 1)[:-1] for a, b in zip(rec.t[:-1], rec.t[1:])] + [rec.t[-1:]])
+        self.x_init = np.vstack([np.array([np.interp(t_grid, rec.t, c) for c in rec.q.T]),
+                                 np.array([np.interp(t_grid, rec.t, c) for c in v0.T])])
+
+    def nominal_z(self, name: str) -> np.ndarray:
+        b = self.blocks[name]
+        return b.nominal / b.scale
+
+    def solve(self, free: list[str] | tuple[str, ...], start: Trial | None = None,
+              init: dict[str, np.ndarray] | None = None, states_from_data: bool = False) -> Trial:
+        """Fit the hypothesis whose free parameters are ``free`` (the others fixed at nominal),
+        starting from ``start`` (its states and shared parameters) and physical ``init`` values.
+        states_from_data: start the states from the recording instead of ``start``'s trajectory
+        (for effects that act only where the recording went but the parent's fit did not)."""
+        free = tuple(free)
+        unknown = [n for n in free if n not in self.blocks]
+        if unknown:
+            raise KeyError(f"parameters {unknown} are not in the shared fit; it holds {list(self.blocks)}")
+        import time
+
+        nlp = self.nlp
+        nxG = nlp.nx * nlp.G
+        X0 = start.X if start is not None and not states_from_data else self.x_init
+        w0 = np.concatenate([X0.ravel(order="F"), np.zeros(nlp.nz)])
+        lbw = np.concatenate([np.full(nxG, -np.inf), np.zeros(nlp.nz)])
+        ubw = np.concatenate([np.full(nxG, np.inf), np.zeros(nlp.nz)])
+        lbg, ubg = np.zeros(nlp.ng), np.zeros(nlp.ng)
+        for name, b in self.blocks.items():
+            sl = slice(nxG + nlp.z_offsets[name], nxG + nlp.z_offsets[name] + b.size)
+            if name in free:
+                z0 = start.z[name] if start is not None and name in start.free else self.nominal_z(name)
+                if init and name in init:
+                    z0 = np.asarray(init[name], float) / b.scale
+                w0[sl] = z0
+                lbw[sl], ubw[sl] = b.lower / b.scale, b.upper / b.scale
+            else:
+                w0[sl] = lbw[sl] = ubw[sl] = self.nominal_z(name)
+                if name.endswith(".axis"):  # |axis| = 1 holds identically: do not impose it
+                    lbg[nlp.axis_rows[name]], ubg[nlp.axis_rows[name]] = -np.inf, np.inf
+        t0 = time.perf_counter()
+        sol = nlp.solver(x0=w0, lbx=lbw, ubx=ubw, lbg=lbg, ubg=ubg)
+        elapsed = time.perf_counter() - t0
+        stats = nlp.solver.stats()
+        wopt = sol["x"].full().ravel()
+        X = wopt[:nxG].reshape(nlp.nx, nlp.G, order="F")
+        n = self.model.nq
+        m = self.fit.substeps
+        values, z = {}, {}
+        for name, b in self.blocks.items():
+            zb = wopt[nxG + nlp.z_offsets[name]: nxG + nlp.z_offsets[name] + b.size]
+            z[name] = zb
+            v = np.clip(zb * b.scale, b.lower, b.upper)
+            if name.endswith(".axis"):
+                v = v / np.linalg.norm(v)
+            values[name] = v
+        return Trial(free, values, X[:n, ::m].T.copy(), X, z, bool(stats.get("success", False)),
+                     str(stats.get("return_status", "")), int(stats.get("iter_count", -1)), elapsed)
