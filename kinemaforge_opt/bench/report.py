@@ -1,6 +1,6 @@
 """Write the benchmark: ``bench.json`` (everything measured), ``bench.md`` (the tables) and PNG
-plots.  Tables that need the RGB-D reconstruction stage print "not yet measured" rather than
-numbers until that stage exists."""
+plots.  The reconstruction tables (Table 1, Table 2, drift, sensitivity, stage scaling) come from
+:mod:`.reco_report`; without a reconstruction part they print "not yet measured"."""
 
 from __future__ import annotations
 
@@ -95,8 +95,10 @@ def arm_table(arm: dict) -> str:
             + _table(["real arm", "model", "quantity"] + joints, per) + "\n")
 
 
-def timing_tables(stages: dict, scaling: dict) -> str:
+def timing_tables(stages: dict, scaling: dict | None) -> str:
     rows = [[k, f"{v:.3f}"] for k, v in stages.items()]
+    if scaling is None:
+        return "## Time per stage\n\n" + _table(["stage", "mean time [s]"], rows) + "\n"
     pts = [[str(p["rate_hz"]), str(p["samples"]), f"{p['time_s']:.2f}", str(p["iterations"]), str(p["converged"])]
            for p in scaling["points"]]
     exp = _fmt(scaling["exponent"], ".2f")
@@ -158,18 +160,37 @@ def plot_discovery(cases: list[dict], path: Path) -> Path:
 
 
 def write_report(result: dict, out_dir: str | Path) -> dict[str, Path]:
-    """Write bench.json, bench.md, scaling.png and discovery.png into ``out_dir``."""
+    """Write bench.json, bench.md and the PNG plots (scaling, discovery, and with the
+    reconstruction part drift_horizon, sensitivity, stage_scaling) into ``out_dir``.  Parts
+    missing from ``result`` (``kinemaforge bench --parts``) are left out of the Markdown."""
+    from .reco_report import plot_drift, plot_sensitivity, plot_stage_scaling, reconstruction_tables
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    md = "\n".join([
-        f"# kinemaforge bench ({result['size']})\n\n{result['machine']}; total {result['total_s']:.0f} s\n",
-        discovery_tables(result["discovery"]["summary"], result["discovery"]["cases"]),
-        sturm_table(result["sturm"]), calibration_table(result["calibration"]), arm_table(result["arm"]),
-        timing_tables(result["stage_time_s"], result["scaling"]), placeholder_tables(),
-    ])
+    sections = [f"# kinemaforge bench ({result['size']})\n\n{result['machine']}; total {result['total_s']:.0f} s\n"]
+    if "discovery" in result:
+        sections.append(discovery_tables(result["discovery"]["summary"], result["discovery"]["cases"]))
+    if "sturm" in result:
+        sections.append(sturm_table(result["sturm"]))
+    if "calibration" in result:
+        sections.append(calibration_table(result["calibration"]))
+    if "arm" in result:
+        sections.append(arm_table(result["arm"]))
+    if "scaling" in result or result.get("stage_time_s"):
+        sections.append(timing_tables(result.get("stage_time_s", {}), result.get("scaling")))
+    reco = result.get("reconstruction")
+    sections.append(reconstruction_tables(reco) if reco else placeholder_tables())
     paths = {"json": out / "bench.json", "markdown": out / "bench.md"}
     write_text_atomic(paths["json"], json.dumps(result, indent=2))
-    write_text_atomic(paths["markdown"], md)
-    paths["scaling"] = plot_scaling(result["scaling"], out / "scaling.png")
-    paths["discovery"] = plot_discovery(result["discovery"]["cases"], out / "discovery.png")
+    write_text_atomic(paths["markdown"], "\n".join(sections))
+    if "scaling" in result:
+        paths["scaling"] = plot_scaling(result["scaling"], out / "scaling.png")
+    if "discovery" in result:
+        paths["discovery"] = plot_discovery(result["discovery"]["cases"], out / "discovery.png")
+    if reco:
+        for name, fn in (("drift_horizon", plot_drift), ("sensitivity", plot_sensitivity),
+                         ("stage_scaling", plot_stage_scaling)):
+            path = fn(reco, out / f"{name}.png")
+            if path is not None:
+                paths[name] = path
     return paths

@@ -4,15 +4,27 @@ from __future__ import annotations
 
 import argparse
 
+# the parts of kinemaforge_opt.bench.run.PARTS, spelled out so `kinemaforge --help` does not import
+# the benchmark (a test keeps the two equal)
+PARTS = ("discovery", "sturm", "calibration", "scaling", "arm", "reconstruction")
+
 EPILOG = """\
 sizes:
   --quick   each concealed effect alone on the door and the drawer plus the null cases, one
             noise seed, one demo-door seed, calibrate scaling at 30/60/120 Hz, the robot-arm
-            side-by-side (nominal vs IDIM-LS vs kinemaforge_opt) on a 6 s excitation
+            side-by-side (nominal vs IDIM-LS vs kinemaforge_opt) on a 6 s excitation; RGB-D
+            reconstruction (Table 1, Table 2, drift, sensitivity, time per stage) on one
+            instance per category at 2 views x 12 steps, 160x120 px
   (full)    adds the effect pairs, three noise seeds, three demo-door seeds, scaling up to
-            400 Hz, a 20 s arm excitation; each run writes its runtime to bench.json ("total_s")
+            400 Hz, a 20 s arm excitation; reconstruction on the seed protocol (8 views x 20
+            steps at 640x480, 2 instances x 2 seeds per category, every category ablated);
+            each run writes its runtime to bench.json ("total_s")
 
-outputs: DIR/bench.json, DIR/bench.md, DIR/scaling.png, DIR/discovery.png
+Generated synthetic cases are cached in $KINEMAFORGE_BENCH_CACHE (default
+~/.cache/kinemaforge/bench) and reused by later runs; reconstructions go to DIR/reconstruction/.
+
+outputs: DIR/bench.json, DIR/bench.md, DIR/scaling.png, DIR/discovery.png, DIR/drift_horizon.png,
+DIR/sensitivity.png, DIR/stage_scaling.png
 """
 
 
@@ -25,6 +37,8 @@ def register(sub) -> None:
     p.add_argument("--quick", action="store_true", help="the quick size (< 10 min on 2 cores)")
     p.add_argument("-o", "--out", default="bench_results", help="output folder (default: bench_results)")
     p.add_argument("--cases", nargs="+", metavar="CASE", help="only these discovery cases (default: all)")
+    p.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS), metavar="PART",
+                   help=f"only these parts of the benchmark: {', '.join(PARTS)} (default: all)")
     p.set_defaults(func=run)
 
 
@@ -45,7 +59,7 @@ def run(args) -> int:
         bar.set_postfix_str(msg)
         bar.update(1)
 
-    result = run_bench(QUICK if args.quick else FULL, args.cases, progress)
+    result = run_bench(QUICK if args.quick else FULL, args.cases, progress, out_dir=args.out, parts=tuple(args.parts))
     bar.close()
     paths = write_report(result, args.out)
     print(paths["markdown"].read_text())
