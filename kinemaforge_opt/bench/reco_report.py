@@ -69,7 +69,8 @@ def reconstruction_tables(reco: dict) -> str:
             rows2.append([v, "–"] + [f"{NOT_AVAILABLE} ({s['reason']})"] + ["–"] * (len(COLUMNS) - 1))
         else:
             rows2.append(_metric_row(v, s))
-    out.append("## Table 2 — ablations\n\nOn " + ", ".join(size["ablation_categories"]) + " (same size as Table 1).\n\n"
+    out.append("## Table 2 — ablations\n\nOn " + ", ".join(size["ablation_categories"])
+               + f" (instances {list(size.get('ablation_instances', size['instances']))}, same size as Table 1).\n\n"
                + _table(["variant", "cases"] + [h for _, h, _ in COLUMNS], rows2) + "\n")
 
     seed_drift = {"1": seed.get("drift_1s_m"), "50": seed.get("drift_50s_m")}

@@ -51,7 +51,8 @@ class RecoSize:
     """What the reconstruction part of one benchmark size runs.
 
     table1: categories × instances × seeds at (views, frames, width × height).  ablation_*: the
-    Table 2 case set (each variant on every case).  views_sweep / frames_sweep: numbers of views
+    Table 2 case set, ablation_categories × ablation_instances (repetition seed 0; each variant
+    on every case).  views_sweep / frames_sweep: numbers of views
     and frames for the sensitivity and scaling sweeps (on ``sweep_category`` instance 0, other
     sizes as table1).  energy_weights: values of the energy-weight option (sweep on the ablation
     cases)."""
@@ -65,6 +66,7 @@ class RecoSize:
     width: int
     height: int
     ablation_categories: tuple[str, ...]
+    ablation_instances: tuple[int, ...]
     views_sweep: tuple[int, ...]
     frames_sweep: tuple[int, ...]
     energy_weights: tuple[float, ...]
@@ -72,11 +74,11 @@ class RecoSize:
 
 
 RECO_QUICK = RecoSize("quick", CATEGORIES, (0,), (0,), views=2, frames=12, width=160, height=120,
-                      ablation_categories=("microwave",), views_sweep=(1, 2, 4), frames_sweep=(8, 12, 16),
-                      energy_weights=(0.1, 1.0, 10.0))
+                      ablation_categories=("microwave",), ablation_instances=(0,),
+                      views_sweep=(1, 2, 4), frames_sweep=(8, 12, 16), energy_weights=(0.1, 1.0, 10.0))
 RECO_FULL = RecoSize("full", CATEGORIES, (0, 1), (0, 1), views=8, frames=20, width=640, height=480,
-                     ablation_categories=CATEGORIES, views_sweep=(2, 4, 8), frames_sweep=(10, 20, 40),
-                     energy_weights=(0.0, 0.1, 1.0, 10.0, 100.0))
+                     ablation_categories=CATEGORIES, ablation_instances=(0,),
+                     views_sweep=(2, 4, 8), frames_sweep=(10, 20, 40), energy_weights=(0.0, 0.1, 1.0, 10.0, 100.0))
 
 
 # --- synthetic cases, cached on disk ------------------------------------------------------------
@@ -313,7 +315,7 @@ def run_reconstruction(size: RecoSize, out_dir: str | Path, cache: Path | None =
     table1["average"] = summarise(t1)
 
     # Table 2
-    abl_cases = [protocol_case(c, n, 0, **base) for c in size.ablation_categories for n in size.instances]
+    abl_cases = [protocol_case(c, n, 0, **base) for c in size.ablation_categories for n in size.ablation_instances]
     table2 = {}
     for variant, opts in ABLATIONS.items():
         why = option_support(opts)
