@@ -39,6 +39,8 @@ from ..model.pinocchio import build_pin_model
 PALETTE = (0xE6194B, 0x3CB44B, 0x4363D8, 0xF58231, 0x911EB4, 0x42D4F4, 0xF032E6, 0xBFEF45, 0x9A6324, 0x800000)
 AXIS_LENGTH_M = 0.2
 LIMIT_RADIUS_M = 0.12
+MAX_CLOUD_POINTS = 20000
+"""Points shown per part cloud at most (see :meth:`Scene.add_point_clouds`)."""
 _MESH_LOADERS = {".obj": g.ObjMeshGeometry, ".stl": g.StlMeshGeometry, ".dae": g.DaeMeshGeometry}
 
 
@@ -116,12 +118,17 @@ class Scene:
         self.vis = meshcat.Visualizer(window=self._window)
 
     # --- content -----------------------------------------------------------------------------
-    def add_point_clouds(self, clouds: Mapping[str, np.ndarray], point_size_m: float = 0.005) -> None:
-        """One point cloud per part, each (N, 3) world points [m], coloured by part."""
+    def add_point_clouds(self, clouds: Mapping[str, np.ndarray], point_size_m: float = 0.005,
+                         max_points: int = MAX_CLOUD_POINTS) -> None:
+        """One point cloud per part, each (N, 3) world points [m], coloured by part.  A part with
+        more than ``max_points`` points shows an evenly strided subset of them (every k-th point,
+        deterministic), which keeps the static HTML small (~16 bytes per point, base64)."""
         for i, (part, points) in enumerate(clouds.items()):
             P = np.asarray(points, dtype=float)
             if P.ndim != 2 or P.shape[1] != 3:
                 raise DataError(f"point cloud of part {part!r} must have shape (N, 3), got {P.shape}")
+            if len(P) > max_points:
+                P = P[np.linspace(0, len(P) - 1, max_points).astype(int)]
             rgb = np.array([(PALETTE[i % len(PALETTE)] >> s) & 0xFF for s in (16, 8, 0)]) / 255.0
             colors = np.tile(rgb, (len(P), 1))
             self.vis["clouds"][part].set_object(g.PointCloud(P.T.astype(np.float32), colors.T.astype(np.float32),
