@@ -1,0 +1,637 @@
+"""Joint inference on RGB-D data: the screw-axis NLP over a kinematic tree.
+
+Decision variables (names as in the :class:`~kinemaforge_opt.nlp.problem.Problem`):
+
+- per movable joint j: ``axis:<j>`` (3, joint frame, on the unit sphere: constraint
+  ``unit_axis:<j>``), ``origin:<j>`` (3, parent link frame, a point on the axis; revolute and
+  helical only — a prismatic joint's line position is not observable — with the gauge constraint
+  ``gauge:<j>`` that keeps it from sliding along the axis), ``pitch:<j>`` (helical only);
+- joint states: ``q`` (n, T) at the T observed time steps, or with the dynamics ``x`` = (q, v)
+  (2n, G) on a grid that subdivides every frame interval into steps of at most ``substep_s``;
+- with the dynamics and recorded forces: ``damping:<j>``, ``coulomb:<j>`` (≥ 0) and
+  ``inertia_ratio:<link>`` (the link's mesh inertia scaled by this ratio: the density is a guess,
+  the forces make the scale identifiable).
+
+Named costs (each reported at the optimum; any can be switched off):
+
+- ``vis``: Σ pseudo-Huber point-to-plane residuals of every moving part's observed points against
+  its surface model moved by the bridge's ``link_poses`` (:mod:`.visual`), divided by δ²;
+- ``dyn``: compressed Hermite–Simpson defects of (q̇ = v, v̇ = ABA(q, v, τ_applied + τ_passive, θ))
+  (the same transcription as :mod:`.joint_space`), each row divided by h × its typical rate
+  and by ``dyn_sigma``, under a pseudo-Huber loss (robust to unmodelled contacts);
+  τ_applied = Jᵀ W maps the recorded force (wrenches.csv: force f at world point p, on the link it
+  grips) to joint forces through the joint screws of the current model;
+- ``energy`` (the seed's Eq. 5): per window, ΔE − ∫ (τ_applied + τ_passive)·v dt relative to the
+  energy scale of the motion; ``soft`` (a cost, divided by ``energy_sigma``) or ``hard`` (the
+  constraint |·| ≤ ``energy_tolerance``).
+
+The objective is the sum of the terms divided by the number of visual residuals.  Every
+per-step function is ``casadi.Function.map``-ped over the time steps, so the graph stays small and
+``jit`` is an option.  Coarse-to-fine (:func:`refine_screws`): closed-form init → ``vis`` warm-up
+on the frame grid with correspondences refreshed between solves → full objective on the dense
+grid.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from ..errors import DataError, KinemaforgeError
+from ..io.sequence import Wrenches
+from ..model import ArticulatedModel, JointDynamics, JointLimits
+from ..physics.effects import EFFECTS
+from ..symbolic import build_dynamics
+from .problem import Problem, Result
+from .visual import Correspondences, SurfaceModel, correspond, fixed_subsample, point_to_plane, pseudo_huber
+
+ENERGY_MODES = ("soft", "hard", "off")
+
+
+@dataclass(frozen=True)
+class ScrewOptions:
+    """Switches and settings of the screw-axis NLP.
+
+    vis, dyn: use the visual / dynamics term.  energy: "soft", "hard" or "off".
+    coarse_to_fine: vis warm-up before the full objective (else one solve from the closed form with
+    correspondences found once).  points_per_part: observed points per part and time step (fixed
+    seeded subsample).  rounds: vis warm-up solves (correspondences refreshed before each).
+    substep_s: longest collocation step [s].  dyn_sigma: relative size of a dynamics defect that
+    counts as one standard deviation.  energy_sigma (soft) / energy_tolerance (hard): relative
+    energy-balance residual per window.  energy_weight: multiplies the soft energy term.
+    energy_window_s: energy window length [s].  fit_dynamics: free damping, Coulomb friction and
+    an inertia ratio per moving link when forces are recorded.  max_iter: IPOPT iterations per
+    solve.  jit: compile the mapped functions (needs a C compiler).
+    """
+
+    vis: bool = True
+    dyn: bool = True
+    energy: str = "soft"
+    coarse_to_fine: bool = True
+    points_per_part: int = 200
+    rounds: int = 2
+    substep_s: float = 1.0 / 30.0
+    dyn_sigma: float = 0.1
+    energy_sigma: float = 0.05
+    energy_tolerance: float = 0.02
+    energy_weight: float = 1.0
+    energy_window_s: float = 1.0
+    fit_dynamics: bool = True
+    max_iter: int = 200
+    jit: bool = False
+
+    def __post_init__(self):
+        if self.energy not in ENERGY_MODES:
+            raise KinemaforgeError(f"energy must be one of {ENERGY_MODES}, got {self.energy!r}")
+        if not (self.vis or self.dyn):
+            raise KinemaforgeError("the screw NLP needs at least one of the terms 'vis' and 'dyn'")
+        if self.points_per_part < 3 or self.rounds < 1 or self.substep_s <= 0:
+            raise KinemaforgeError("points_per_part >= 3, rounds >= 1 and substep_s > 0 are required")
+
+
+@dataclass(frozen=True, eq=False)
+class ScrewData:
+    """What the NLP fits.
+
+    model: the closed-form model; the root link is the world and every link frame is placed at the
+    zero configuration (q = 0).  times: (T,) observed time steps [s].  q_init: (T, n) closed-form
+    joint values, ``model.joint_names`` order.  observed: moving link -> per time step the (M, 3)
+    world points [m] seen on it (None or empty when not seen).  surfaces: moving link -> its
+    :class:`SurfaceModel` at q = 0.  delta: pseudo-Huber width [m] (point noise level).
+    gate: correspondence rejection distance [m].  wrenches: recorded forces or None.
+    pushed_link: (len(wrenches.t),) name of the link the force acts on per sample ("" = none).
+    """
+
+    model: ArticulatedModel
+    times: np.ndarray
+    q_init: np.ndarray
+    observed: dict[str, list[np.ndarray | None]]
+    surfaces: dict[str, SurfaceModel]
+    delta: float
+    gate: float
+    wrenches: Wrenches | None = None
+    pushed_link: np.ndarray | None = None
+
+    def __post_init__(self):
+        n, T = self.model.nq, self.times.size
+        if self.q_init.shape != (T, n):
+            raise DataError(f"q_init has shape {self.q_init.shape}, expected (T, n) = ({T}, {n})")
+        for link, obs in self.observed.items():
+            if link not in self.surfaces:
+                raise DataError(f"part {link!r} has observed points but no surface model")
+            if len(obs) != T:
+                raise DataError(f"part {link!r}: {len(obs)} observation steps, expected {T}")
+        if self.wrenches is not None and (self.pushed_link is None or len(self.pushed_link) != self.wrenches.t.size):
+            raise DataError("wrenches need pushed_link: one link name per wrench sample")
+
+
+@dataclass
+class ScrewState:
+    """Current estimate.  axes (n, 3) joint frame (unit), origins (n, 3) parent frame [m], pitches (n,)
+    [m/rad]; t (G,) grid [s], q (G, n), v (G, n) or None; damping, coulomb (n,); inertia_ratio
+    {link: ratio}."""
+
+    axes: np.ndarray
+    origins: np.ndarray
+    pitches: np.ndarray
+    t: np.ndarray
+    q: np.ndarray
+    v: np.ndarray | None
+    damping: np.ndarray
+    coulomb: np.ndarray
+    inertia_ratio: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, eq=False)
+class ScrewProblem:
+    """A built (not solved) screw NLP: ``problem`` plus what reading its solution needs.
+    frame_cols: (T,) grid column of each observed time step.  dynamics: the bridge functions.
+    n_vis: number of weighted visual residuals (the objective's normaliser)."""
+
+    problem: Problem
+    data: ScrewData
+    options: ScrewOptions
+    state: ScrewState
+    frame_cols: np.ndarray
+    dynamics: object
+    free: tuple[str, ...]
+    use_dyn: bool
+    n_vis: int
+
+
+@dataclass(frozen=True, eq=False)
+class ScrewResult:
+    """The refined estimate.  model: the model with refined axes, origins, pitches, limits (observed
+    range of q), and damping / Coulomb friction / scaled inertia where identified.  q: (T, n) at the
+    observed steps.  terms: name -> value of each active term at the end (unweighted sums, see
+    module doc), None for a term switched off.  iterations: IPOPT iterations over all stages.
+    success: every stage converged.  stages: per stage (name, iterations, success, seconds).
+    identified: which dynamic quantities were fitted.  notes: why a term was off."""
+
+    model: ArticulatedModel
+    q: np.ndarray
+    state: ScrewState
+    terms: dict[str, float | None]
+    iterations: int
+    success: bool
+    stages: tuple[dict, ...]
+    time_s: float
+    identified: tuple[str, ...]
+    notes: tuple[str, ...]
+
+
+# --- helpers ---------------------------------------------------------------------------------
+
+
+def _grid(times: np.ndarray, substep_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Grid (G,) subdividing every frame interval into steps <= substep_s, and the frame columns."""
+    pieces, cols, c = [], [], 0
+    for a, b in zip(times[:-1], times[1:]):
+        m = max(1, int(np.ceil((b - a) / substep_s - 1e-9)))
+        pieces.append(np.linspace(a, b, m + 1)[:-1])
+        cols.append(c)
+        c += m
+    cols.append(c)
+    return np.concatenate(pieces + [times[-1:]]), np.asarray(cols)
+
+
+def initial_state(data: ScrewData) -> ScrewState:
+    """The closed-form estimate as a state on the frame grid."""
+    m = data.model
+    n = m.nq
+    joints = m.movable_joints
+    return ScrewState(
+        axes=np.array([j.axis / np.linalg.norm(j.axis) for j in joints]).reshape(n, 3),
+        origins=np.array([j.T_parent_joint[:3, 3] for j in joints]).reshape(n, 3),
+        pitches=np.array([j.pitch for j in joints]),
+        t=data.times.copy(), q=data.q_init.copy(), v=None,
+        damping=np.array([j.dynamics.damping for j in joints]),
+        coulomb=np.array([j.dynamics.coulomb for j in joints]),
+    )
+
+
+def state_model(data: ScrewData, state: ScrewState) -> ArticulatedModel:
+    """The model of ``state``: axes, origins, pitches, damping/Coulomb and inertia ratios applied,
+    limits = the range of q at the observed steps."""
+    model = data.model
+    cols = np.searchsorted(state.t, data.times)
+    for k, j in enumerate(model.movable_joints):
+        T = j.T_parent_joint.copy()
+        if j.type in ("revolute", "continuous", "helical"):
+            T[:3, 3] = state.origins[k]
+        qk = state.q[cols, k]
+        lim = j.limits if j.limits is not None else JointLimits()
+        limits = JointLimits(float(qk.min()), float(qk.max()), lim.effort, lim.velocity)
+        dyn = dataclasses.replace(j.dynamics, damping=float(state.damping[k]), coulomb=float(state.coulomb[k]))
+        model = model.with_joint(j.name, T_parent_joint=T, axis=state.axes[k] / np.linalg.norm(state.axes[k]),
+                                 pitch=float(state.pitches[k]) if j.type == "helical" else 0.0,
+                                 limits=limits, dynamics=dyn)
+    for link, r in state.inertia_ratio.items():
+        inert = model.link(link).inertial
+        model = model.with_link(link, inertial=dataclasses.replace(inert, mass=inert.mass * r, inertia=inert.inertia * r))
+    return model
+
+
+def _transforms_world0_t(dyn, theta, link_index: int, q, q_zero):
+    """Symbolic T_world_link(q) · T_world_link(0)⁻¹ (4, 4) of link ``link_index``."""
+    P = dyn.link_poses(q, theta)
+    P0 = dyn.link_poses(q_zero, theta)
+    T = P[4 * link_index : 4 * link_index + 4, :]
+    T0 = P0[4 * link_index : 4 * link_index + 4, :]
+    R0t = T0[:3, :3].T
+    inv0 = ca.vertcat(ca.horzcat(R0t, -ca.mtimes(R0t, T0[:3, 3])), ca.horzcat(ca.SX.zeros(1, 3), ca.SX.ones(1, 1)))
+    return ca.mtimes(T, inv0)
+
+
+def transforms_world0_t(model: ArticulatedModel, link: str, q: np.ndarray) -> np.ndarray:
+    """Numeric (T, 4, 4) motion of ``link`` from the zero configuration to each q (T, n)."""
+    dyn = build_dynamics(model)
+    i = model.link_names.index(link)
+    T0 = dyn.poses(np.zeros(model.nq))[i]
+    inv0 = np.linalg.inv(T0)
+    return np.array([dyn.poses(qq)[i] @ inv0 for qq in q])
+
+
+def correspondences(data: ScrewData, state: ScrewState, size: int, seed: int = 0) -> dict[str, list[Correspondences]]:
+    """Per moving part and observed step, correspondences under the motion of ``state``."""
+    model = state_model(data, state)
+    cols = np.searchsorted(state.t, data.times)
+    out = {}
+    for p, (link, obs) in enumerate(data.observed.items()):
+        Ts = transforms_world0_t(model, link, state.q[cols])
+        items = []
+        for s, pts in enumerate(obs):
+            pts = np.zeros((0, 3)) if pts is None else pts
+            pts = pts[fixed_subsample(pts, size, seed + 1000 * p + s)]
+            items.append(correspond(pts, Ts[s], data.surfaces[link], data.gate, size))
+        out[link] = items
+    return out
+
+
+def _ancestors(model: ArticulatedModel, link: str) -> list[int]:
+    """Indices (in movable-joint order) of the movable joints from the root to ``link``."""
+    names = model.joint_names
+    parent_joint = {j.child: j for j in model.joints}
+    out = []
+    while link in parent_joint:
+        j = parent_joint[link]
+        if j.name in names:
+            out.append(names.index(j.name))
+        link = j.parent
+    return out[::-1]
+
+
+def _applied_force(model, dyn, theta, axis_of, pitch_of, q, p, f, sel, pushed: list[str]):
+    """τ = Jᵀ W (n,): force f (3,) [N] at world point p (3,) [m] acting on link ``pushed[i]`` with
+    weight sel[i]; each ancestor joint k contributes its screw's work rate: a·((p − o) × f) for a
+    rotation (+ pitch · a·f for a helix), a·f for a translation (a, o: world axis and point)."""
+    n = model.nq
+    P = dyn.link_poses(q, theta)
+    tau = [ca.SX(0)] * n
+    joints = model.movable_joints
+    for i, link in enumerate(pushed):
+        for k in _ancestors(model, link):
+            j = joints[k]
+            c = model.link_names.index(j.child)
+            R, o = P[4 * c : 4 * c + 3, :3], P[4 * c : 4 * c + 3, 3]
+            a = ca.mtimes(R, axis_of[k])
+            a = a / ca.norm_2(a)
+            if j.type == "prismatic":
+                g = ca.dot(a, f)
+            else:
+                g = ca.dot(a, ca.cross(p - o, f))
+                if j.type == "helical":
+                    g = g + pitch_of[k] * ca.dot(a, f)
+            tau[k] = tau[k] + sel[i] * g
+    return ca.vertcat(*tau)
+
+
+def _wrench_at(data: ScrewData, t: np.ndarray, pushed: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Force application point (3, len(t)) [m], force (3, len(t)) [N] and link selector
+    (len(pushed), len(t)) at times ``t`` (linear interpolation; the selector takes the nearest
+    sample's link)."""
+    w = data.wrenches
+    if w is None:
+        z = np.zeros((3, t.size))
+        return z, z.copy(), np.zeros((len(pushed), t.size))
+    p = np.array([np.interp(t, w.t, c) for c in w.points_world.T])
+    f = np.array([np.interp(t, w.t, c, left=0.0, right=0.0) for c in w.forces_world.T])
+    near = np.clip(np.searchsorted(w.t, t), 0, w.t.size - 1)
+    sel = np.array([(data.pushed_link[near] == link).astype(float) for link in pushed]).reshape(len(pushed), t.size)
+    return p, f, sel
+
+
+def _rates(t: np.ndarray, q: np.ndarray) -> tuple[CubicSpline, np.ndarray, np.ndarray]:
+    """A not-a-knot spline through q (T, n) at t, and per-joint RMS speed and acceleration of it
+    (floored so a joint that does not move still has a finite scale)."""
+    spline = CubicSpline(t, q, axis=0)
+    tt = np.linspace(t[0], t[-1], max(50, 10 * t.size))
+    v, a = spline(tt, 1), spline(tt, 2)
+    duration = max(t[-1] - t[0], 1e-6)
+    v_s = np.maximum(np.sqrt(np.mean(v**2, axis=0)), 1e-3)
+    a_s = np.maximum(np.sqrt(np.mean(a**2, axis=0)), v_s / duration)
+    return spline, v_s, a_s
+
+
+def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewState,
+                        corr: dict[str, list[Correspondences]] | None, dense: bool) -> ScrewProblem:
+    """Build the NLP around ``state`` with fixed correspondences ``corr`` (see module doc).
+    ``dense``: states (q, v) on the collocation grid with the dynamics/energy terms as the options
+    say; else q on the frame grid and only ``vis``."""
+    model = data.model
+    n = model.nq
+    joints = model.movable_joints
+    have_forces = data.wrenches is not None
+    use_dyn = dense and options.dyn
+    use_energy = use_dyn and options.energy != "off"
+    fit_dyn = use_dyn and options.fit_dynamics and have_forces
+    pushed = sorted({l for l in (data.pushed_link if have_forces else ()) if l})
+    moving_links = sorted({j.child for j in joints} | {l for j in joints for l in model.subtree_links(j.child)})
+    moving_links = [l for l in model.link_names if l in moving_links]
+
+    free = []
+    for j in joints:
+        free.append(f"{j.name}.axis")
+        if j.type in ("revolute", "continuous", "helical"):
+            free.append(f"{j.name}.origin")
+        if j.type == "helical":
+            free.append(f"{j.name}.pitch")
+    ratio_links = [l for l in moving_links if model.link(l).inertial is not None and model.link(l).inertial.mass > 0] if fit_dyn else []
+    free += [f"{l}.inertia" for l in ratio_links]
+    dyn = build_dynamics(model, free=free)
+
+    # grid and initial states
+    if use_dyn:
+        t_grid, frame_cols = _grid(data.times, options.substep_s)
+    else:
+        t_grid, frame_cols = data.times.copy(), np.arange(data.times.size)
+    if state.t.size == t_grid.size and np.allclose(state.t, t_grid):
+        q0 = state.q
+        v0 = state.v
+    else:
+        q0 = CubicSpline(state.t, state.q, axis=0)(t_grid) if state.t.size > 2 else np.array([np.interp(t_grid, state.t, c) for c in state.q.T]).T
+        v0 = None
+    cols_state = np.searchsorted(state.t, data.times)
+    spline, v_s, a_s = _rates(data.times, state.q[cols_state])
+    if use_dyn and v0 is None:
+        v0 = spline(t_grid, 1)
+
+    prob = Problem("screw_axes")
+    # --- joint parameters -> theta (MX) and their SX twins for the per-step functions --------
+    theta_sx = ca.SX.sym("theta", dyn.theta0.size)
+    theta_parts = []
+    axis_of, pitch_of = [], []
+    for k, j in enumerate(joints):
+        a_var = prob.variable(f"axis:{j.name}", 3, lower=-1.5, upper=1.5, init=state.axes[k])
+        prob.add_constraint(f"unit_axis:{j.name}", ca.sumsqr(a_var) - 1.0)
+        theta_parts.append(a_var)
+        axis_of.append(theta_sx[dyn.parameter(f"{j.name}.axis").slice])
+        if j.type in ("revolute", "continuous", "helical"):
+            o_var = prob.variable(f"origin:{j.name}", 3, init=state.origins[k])
+            a_parent = j.T_parent_joint[:3, :3] @ state.axes[k]
+            prob.add_constraint(f"gauge:{j.name}", ca.dot(ca.DM(a_parent), o_var - ca.DM(state.origins[k])))
+            theta_parts.append(o_var)
+        if j.type == "helical":
+            p_var = prob.variable(f"pitch:{j.name}", 1, init=state.pitches[k])
+            theta_parts.append(p_var)
+            pitch_of.append(theta_sx[dyn.parameter(f"{j.name}.pitch").slice])
+        else:
+            pitch_of.append(None)
+    ratios = {}
+    for l in ratio_links:
+        r = prob.variable(f"inertia_ratio:{l}", 1, lower=0.02, upper=50.0, init=state.inertia_ratio.get(l, 1.0))
+        ratios[l] = r
+        theta_parts.append(r * ca.DM(dyn.parameter(f"{l}.inertia").nominal))
+    theta_mx = ca.vertcat(*theta_parts)
+
+    # --- states ------------------------------------------------------------------------------
+    G = t_grid.size
+    if use_dyn:
+        X = prob.variable("x", (2 * n, G), init=np.vstack([q0.T, v0.T]))
+        Q, V = X[:n, :], X[n:, :]
+    else:
+        lower = upper = None
+        if not options.vis:  # nothing observes q: hold the closed-form values
+            lower = upper = q0.T
+        Q = prob.variable("q", (n, G), init=q0.T, lower=-np.inf if lower is None else lower,
+                          upper=np.inf if upper is None else upper)
+        V = None
+    terms = {}
+    n_vis = 0
+
+    # --- vis -----------------------------------------------------------------------------------
+    jit = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O1"]}} if options.jit else {}
+    if options.vis and corr:
+        total = ca.MX(0)
+        qs = ca.SX.sym("q", n)
+        for link, items in corr.items():
+            N = items[0].weights.size
+            Y, Xs, Nn, W = (ca.SX.sym(s, r, N) for s, r in (("y", 3), ("x", 3), ("n", 3), ("w", 1)))
+            Tm = _transforms_world0_t(dyn, theta_sx, model.link_names.index(link), qs, ca.DM.zeros(n))
+            r = point_to_plane(Tm, Xs, Nn, Y)
+            step = ca.Function(f"vis_{link}", [qs, theta_sx, Y, Xs, Nn, W],
+                               [ca.dot(W.T, pseudo_huber(r, data.delta)) / data.delta**2], jit)
+            mapped = step.map(len(items))
+            stack = lambda name: np.hstack([getattr(c, name) for c in items])  # noqa: E731
+            Qf = Q[:, frame_cols.tolist()]
+            vals = mapped(Qf, theta_mx, stack("observed"), stack("targets"), stack("normals"),
+                          np.concatenate([c.weights for c in items])[None, :])
+            total = total + ca.sum2(vals)
+            n_vis += int(sum(c.weights.sum() for c in items))
+        terms["vis"] = total
+    norm = float(max(n_vis, 1))
+
+    # --- dyn and energy --------------------------------------------------------------------
+    if use_dyn:
+        eps = np.maximum(0.03 * v_s, 1e-4)
+        phi = ca.SX.sym("phi", 2 * n)  # damping, coulomb
+
+        def passive(q, v):
+            return ca.vertcat(*[EFFECTS["viscous_damping"].force(q[k], v[k], phi[k])
+                                + EFFECTS["coulomb_friction"].force(q[k], v[k], phi[n + k], eps=float(eps[k]))
+                                for k in range(n)])
+
+        ps, fs, ss = ca.SX.sym("p", 3), ca.SX.sym("f", 3), ca.SX.sym("sel", max(len(pushed), 1))
+
+        def rhs(x, p, f, sel):
+            q, v = x[:n], x[n:]
+            u = _applied_force(model, dyn, theta_sx, axis_of, pitch_of, q, p, f, sel, pushed) if pushed else ca.SX.zeros(n)
+            tau = u + passive(q, v)
+            return ca.vertcat(v, dyn.aba(q, v, tau, theta_sx)), ca.dot(tau, v)
+
+        def energy_of(x):
+            q, v = x[:n], x[n:]
+            return 0.5 * ca.dot(v, ca.mtimes(dyn.crba(q, theta_sx), v)) + dyn.potential_energy(q, theta_sx)
+
+        xk, xk1 = ca.SX.sym("xk", 2 * n), ca.SX.sym("xk1", 2 * n)
+        pk, fk, sk = ca.SX.sym("pk", 3), ca.SX.sym("fk", 3), ca.SX.sym("sk", ss.numel())
+        pm, fm, sm = ca.SX.sym("pm", 3), ca.SX.sym("fm", 3), ca.SX.sym("sm", ss.numel())
+        pk1, fk1, sk1 = ca.SX.sym("pk1", 3), ca.SX.sym("fk1", 3), ca.SX.sym("sk1", ss.numel())
+        h = ca.SX.sym("h")
+        rk, wk = rhs(xk, pk, fk, sk)
+        rk1, wk1 = rhs(xk1, pk1, fk1, sk1)
+        xm = (xk + xk1) / 2 + h / 8 * (rk - rk1)
+        rm, wm = rhs(xm, pm, fm, sm)
+        defect = xk1 - xk - h / 6 * (rk + 4 * rm + rk1)
+        scale = ca.DM(np.concatenate([v_s, a_s]))
+        dnorm = defect / (h * scale) / options.dyn_sigma
+        interval = ca.Function("hermite_simpson", [xk, xk1, pk, fk, sk, pm, fm, sm, pk1, fk1, sk1, h, theta_sx, phi],
+                               [ca.sum1(pseudo_huber(dnorm, 1.0)), h / 6 * (wk + 4 * wm + wk1), energy_of(xk1) - energy_of(xk)], jit)
+        mapped = interval.map(G - 1)
+        t_mid = (t_grid[:-1] + t_grid[1:]) / 2
+        P, F, S = _wrench_at(data, t_grid, pushed or [""])
+        Pm, Fm, Sm = _wrench_at(data, t_mid, pushed or [""])
+        phi_parts = []
+        for name, values in (("damping", state.damping), ("coulomb", state.coulomb)):
+            for k, j in enumerate(joints):
+                if fit_dyn:
+                    force_s = _force_scale(data, j, v_s[k], a_s[k])
+                    sc = force_s / v_s[k] if name == "damping" else force_s
+                    z = prob.variable(f"{name}:{j.name}", 1, lower=0.0, init=values[k] / sc)
+                    phi_parts.append(z * sc)
+                else:
+                    phi_parts.append(ca.MX(values[k]))
+        phi_mx = ca.vertcat(*phi_parts)
+        Dsum, Wk, dE = mapped(X[:, :-1], X[:, 1:], P[:, :-1], F[:, :-1], S[:, :-1], Pm, Fm, Sm,
+                              P[:, 1:], F[:, 1:], S[:, 1:], np.diff(t_grid)[None, :], theta_mx, phi_mx)
+        terms["dyn"] = ca.sum2(Dsum)
+        if use_energy:
+            steps = max(1, int(round(options.energy_window_s / max(np.median(np.diff(t_grid)), 1e-9))))
+            edges = list(range(0, G - 1, steps)) + [G - 1]
+            resid = ca.vertcat(*[ca.sum2(dE[:, a:b]) - ca.sum2(Wk[:, a:b]) for a, b in zip(edges[:-1], edges[1:])])
+            e_scale = _energy_scale(model, dyn, q0, v0)
+            rel = resid / e_scale
+            if options.energy == "soft":
+                terms["energy"] = ca.sumsqr(rel / options.energy_sigma) * options.energy_weight
+            else:
+                prob.add_constraint("energy", rel, -options.energy_tolerance, options.energy_tolerance)
+                terms["energy_residual"] = ca.sumsqr(rel)
+    for name, expr in terms.items():
+        if name == "energy_residual":  # reported, not minimised
+            continue
+        prob.add_cost(name, expr, weight=1.0 / norm)
+    if "energy_residual" in terms:
+        prob.add_cost("energy_residual", terms["energy_residual"], weight=0.0)
+    if not prob.terms["costs"]:
+        raise KinemaforgeError("the screw NLP has no active term: enable 'vis' (with observed points) or 'dyn'")
+    new_state = dataclasses.replace(state, t=t_grid, q=q0, v=v0 if use_dyn else None)
+    return ScrewProblem(prob, data, options, new_state, frame_cols, dyn, tuple(free), use_dyn, n_vis)
+
+
+def _force_scale(data: ScrewData, joint, v_s: float, a_s: float) -> float:
+    """Typical generalised force on ``joint`` [N·m or N]: inertia along it × typical acceleration."""
+    import pinocchio as pin
+
+    from ..model.pinocchio import build_pin_model
+
+    pm = build_pin_model(data.model)
+    M = pin.crba(pm, pm.createData(), np.zeros(data.model.nq))
+    k = data.model.joint_index(joint.name)
+    return float(max(M[k, k] * a_s, 1e-6))
+
+
+def _energy_scale(model: ArticulatedModel, dyn, q: np.ndarray, v: np.ndarray) -> float:
+    """Spread of the mechanical energy along the initial trajectory [J] (≥ 1e-9)."""
+    E = [0.5 * vv @ dyn.crba(qq, dyn.theta0).full() @ vv + float(dyn.potential_energy(qq, dyn.theta0)) for qq, vv in zip(q, v)]
+    return float(max(np.ptp(E), 1e-9))
+
+
+def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
+    """The state at ``result``'s optimum."""
+    st, vals = sp.state, result.values
+    joints = sp.data.model.movable_joints
+    n = len(joints)
+    axes, origins, pitches = st.axes.copy(), st.origins.copy(), st.pitches.copy()
+    damping, coulomb = st.damping.copy(), st.coulomb.copy()
+    for k, j in enumerate(joints):
+        a = vals[f"axis:{j.name}"]
+        axes[k] = a / np.linalg.norm(a)
+        if f"origin:{j.name}" in vals:
+            origins[k] = vals[f"origin:{j.name}"]
+        if f"pitch:{j.name}" in vals:
+            pitches[k] = float(vals[f"pitch:{j.name}"][0])
+    ratio = dict(st.inertia_ratio)
+    for name, v in vals.items():
+        if name.startswith("inertia_ratio:"):
+            ratio[name.split(":", 1)[1]] = float(v[0])
+    if "x" in vals:
+        q, v = vals["x"][:n].T, vals["x"][n:].T
+    else:
+        q, v = vals["q"].T, None
+    # damping / coulomb are scaled variables: recover physical values from the built expression
+    if any(name.startswith(("damping:", "coulomb:")) for name in vals):
+        cols = np.searchsorted(st.t, sp.data.times)
+        spline, v_s, a_s = _rates(sp.data.times, st.q[cols])
+        for k, j in enumerate(joints):
+            fs = _force_scale(sp.data, j, v_s[k], a_s[k])
+            if f"damping:{j.name}" in vals:
+                damping[k] = float(vals[f"damping:{j.name}"][0]) * fs / v_s[k]
+                coulomb[k] = float(vals[f"coulomb:{j.name}"][0]) * fs
+    return ScrewState(axes, origins, pitches, st.t.copy(), q, v, damping, coulomb, ratio)
+
+
+def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> ScrewResult:
+    """Coarse-to-fine refinement of the closed-form joints in ``data`` (see module doc).
+
+    Stages: ``vis`` warm-up (``options.rounds`` solves on the frame grid, correspondences refreshed
+    before each) then the full objective on the dense grid (correspondences refreshed once more);
+    without coarse-to-fine, one full solve with the correspondences of the closed form.  A stage
+    that does not converge is recorded (``success`` False) and its iterate is kept only if it
+    lowered that stage's objective."""
+    options = options or ScrewOptions()
+    start = time.perf_counter()
+    state = initial_state(data)
+    stages, notes = [], []
+    size = options.points_per_part
+    want_dense = options.dyn and data.wrenches is not None
+    if options.dyn and data.wrenches is None:
+        notes.append("dyn: no recorded forces (wrenches.csv); the dynamics term is off")
+    if not options.vis and not want_dense:
+        raise KinemaforgeError("the screw NLP has nothing to fit: 'vis' is off and 'dyn' has no recorded forces")
+    opts = dataclasses.replace(options, dyn=want_dense)
+
+    def run(name, corr, dense):
+        nonlocal state
+        t0 = time.perf_counter()
+        sp = build_screw_problem(data, opts, state, corr, dense)
+        res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options={"ipopt.acceptable_tol": 1e-5})
+        improved = res.success or np.isfinite(res.objective)
+        if improved:
+            state = read_solution(sp, res)
+        stages.append({"stage": name, "iterations": res.iterations, "success": res.success, "status": res.status,
+                       "time_s": time.perf_counter() - t0, "costs": res.costs, "n_vis": sp.n_vis,
+                       "variables": sp.problem.sizes["variables"]})
+        return sp, res
+
+    if options.coarse_to_fine and options.vis:
+        for r in range(options.rounds):
+            run(f"vis_warmup_{r + 1}", correspondences(data, state, size), dense=False)
+        corr = correspondences(data, state, size)
+    else:
+        corr = correspondences(data, state, size) if options.vis else None
+    sp, res = run("full", corr, dense=True)
+    model = state_model(data, state)
+    cols = np.searchsorted(state.t, data.times)
+    terms = {"vis": None, "dyn": None, "energy": None}
+    for name, value in res.costs.items():
+        key = "energy" if name == "energy_residual" else name
+        terms[key] = float(value) * (max(sp.n_vis, 1) if name != "energy_residual" else 1.0)
+    identified = tuple(n.split(":", 1)[0] + ":" + n.split(":", 1)[1] for n in res.values
+                       if n.startswith(("damping:", "coulomb:", "inertia_ratio:")))
+    if not sp.use_dyn:
+        model = _without_fitted_dynamics(model, data.model)
+    return ScrewResult(model, state.q[cols], state, terms, int(sum(s["iterations"] for s in stages)),
+                       all(s["success"] for s in stages), tuple(stages), time.perf_counter() - start,
+                       identified, tuple(notes))
+
+
+def _without_fitted_dynamics(model: ArticulatedModel, original: ArticulatedModel) -> ArticulatedModel:
+    """Keep the original joint dynamics when none were fitted."""
+    for j in original.movable_joints:
+        model = model.with_joint(j.name, dynamics=j.dynamics)
+    return model

@@ -1,0 +1,127 @@
+"""The visual term of the screw-axis solver: observed points against each part's surface model
+moved by forward kinematics — a differentiable stand-in for rendering the model's depth.
+
+Surface model of a part: (K, 3) points and unit normals on the part at the *zero
+configuration* (q = 0), world frame.  At time step t the part's link has moved by
+
+    T_world0_t(q_t, θ) = T_world_link(q_t, θ) · T_world_link(0, θ)⁻¹        (4, 4)
+
+(both from the bridge's ``link_poses``, so the choice of link frame cancels and the surface does
+not move when the NLP moves a joint's origin at q = 0).  An observed point y (world, time t)
+corresponding to the surface point x with normal n gives the point-to-plane residual
+
+    r = (R n) · (R x + p − y) = n · (x + Rᵀ (p − y)),        T_world0_t = [R p; 0 1],
+
+and the term is Σ ρ_δ(r) with ρ_δ the pseudo-Huber loss δ² (√(1 + (r/δ)²) − 1) (quadratic below δ,
+linear above, smooth everywhere so IPOPT's Newton steps stay well defined).
+
+Correspondences (which surface point each observed point is compared with) are found by a
+nearest-neighbour search in the zero configuration and held fixed during one solve; the
+coarse-to-fine loop refreshes them between solves, as ICP does.  Every function here accepts
+numpy arrays; :func:`point_to_plane` and :func:`pseudo_huber` accept casadi symbols too.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import open3d as o3d
+from scipy.spatial import cKDTree
+
+from ..errors import DataError
+
+
+@dataclass(frozen=True, eq=False)
+class SurfaceModel:
+    """A part's surface at the zero configuration: points (K, 3) [m] and unit normals (K, 3),
+    world frame."""
+
+    name: str
+    points: np.ndarray
+    normals: np.ndarray
+
+
+def surface_model(points_world0: np.ndarray, spacing: float, name: str, max_points: int = 4000) -> SurfaceModel:
+    """Surface model of a part from its fused points at the zero configuration (N, 3) [m]:
+    voxel-downsampled to ``spacing`` [m] (coarser if more than ``max_points`` remain), normals
+    from local plane fits (open3d, 20 neighbours within 4 spacings).  Raises DataError naming
+    the part if fewer than 10 points remain."""
+    pts = np.asarray(points_world0, dtype=float)
+    if len(pts) < 10:
+        raise DataError(f"part {name!r}: {len(pts)} points; a surface model needs at least 10")
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    voxel = spacing
+    down = pcd.voxel_down_sample(voxel)
+    while len(down.points) > max_points:
+        voxel *= 1.3
+        down = pcd.voxel_down_sample(voxel)
+    if len(down.points) < 10:
+        raise DataError(f"part {name!r}: {len(down.points)} points after downsampling to {voxel:.3g} m; need at least 10")
+    down.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=4 * voxel, max_nn=20))
+    normals = np.asarray(down.normals, dtype=float)
+    return SurfaceModel(name, np.asarray(down.points, dtype=float), normals / np.linalg.norm(normals, axis=1, keepdims=True))
+
+
+def pseudo_huber(r, delta: float):
+    """δ² (√(1 + (r/δ)²) − 1): ≈ r²/2 for |r| ≪ δ, ≈ δ|r| for |r| ≫ δ (numpy or casadi)."""
+    if isinstance(r, (ca.SX, ca.MX, ca.DM)):
+        return delta**2 * (ca.sqrt(1 + (r / delta) ** 2) - 1)
+    return delta**2 * (np.sqrt(1 + (np.asarray(r) / delta) ** 2) - 1)
+
+
+def point_to_plane(T_world0_t, x0, n0, y):
+    """Residuals (N,) [m] of observed points ``y`` (3, N) against surface points ``x0`` (3, N) with
+    normals ``n0`` (3, N), both at the zero configuration, after the part moved by ``T_world0_t``
+    (4, 4).  Column-major point blocks so that casadi symbols and numpy arrays both work."""
+    R, p = T_world0_t[:3, :3], T_world0_t[:3, 3]
+    if isinstance(T_world0_t, (ca.SX, ca.MX)):
+        back = ca.mtimes(R.T, ca.repmat(p, 1, y.shape[1]) - y)
+        return ca.sum1(n0 * (x0 + back)).T
+    back = np.asarray(R).T @ (np.asarray(p)[:, None] - np.asarray(y))
+    return np.sum(np.asarray(n0) * (np.asarray(x0) + back), axis=0)
+
+
+@dataclass(frozen=True, eq=False)
+class Correspondences:
+    """For one part and one time step: observed points (3, N) [m], their surface points and
+    normals (3, N) at the zero configuration, and weights (N,) (0 = rejected or padding)."""
+
+    observed: np.ndarray
+    targets: np.ndarray
+    normals: np.ndarray
+    weights: np.ndarray
+
+
+def fixed_subsample(points: np.ndarray, n: int, seed: int) -> np.ndarray:
+    """Row indices of a fixed, seeded subsample of at most ``n`` of ``points`` (N, 3)."""
+    if len(points) <= n:
+        return np.arange(len(points))
+    return np.sort(np.random.default_rng(seed).choice(len(points), n, replace=False))
+
+
+def correspond(observed_world: np.ndarray, T_world0_t: np.ndarray, surface: SurfaceModel, gate: float,
+               size: int) -> Correspondences:
+    """Nearest surface point of each observed point (M, 3) moved back to the zero configuration by
+    ``T_world0_t``⁻¹ (4, 4); pairs farther than ``gate`` [m] get weight 0.  Padded with zero
+    weights to ``size`` columns (a fixed size lets one casadi Function be mapped over steps)."""
+    m = len(observed_world)
+    if m > size:
+        raise ValueError(f"{m} observed points exceed the block size {size}")
+    R, p = T_world0_t[:3, :3], T_world0_t[:3, 3]
+    back = (observed_world - p) @ R  # R^T (y - p), row-wise
+    d, idx = cKDTree(surface.points).query(back) if m else (np.zeros(0), np.zeros(0, dtype=int))
+    obs = np.zeros((3, size))
+    tgt = np.zeros((3, size))
+    nrm = np.zeros((3, size))
+    w = np.zeros(size)
+    obs[:, :m] = observed_world.T
+    tgt[:, :m] = surface.points[idx].T
+    nrm[:, :m] = surface.normals[idx].T
+    w[:m] = (d <= gate).astype(float)
+    # padding: copies of a valid pair with zero weight keep the residual finite
+    if m < size:
+        obs[:, m:] = tgt[:, m:] = 0.0
+        nrm[0, m:] = 1.0
+    return Correspondences(obs, tgt, nrm, w)

@@ -1,0 +1,114 @@
+"""Exact synthetic worlds for the screw-axis NLP: a box-shaped part on a known joint, its exact
+surface at the zero configuration, exact observed points along a known trajectory, and, for the
+dynamics, a trajectory integrated independently (scipy ``solve_ivp`` on pinocchio's numeric ABA)
+under a known pushing force."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+from scipy.integrate import solve_ivp
+
+from kinemaforge_opt.io.sequence import Wrenches
+from kinemaforge_opt.model import ArticulatedModel, Inertial, Joint, JointDynamics, JointLimits, Link
+from kinemaforge_opt.model.pinocchio import build_pin_model
+from kinemaforge_opt.nlp.reconstruction import ScrewData
+from kinemaforge_opt.nlp.visual import SurfaceModel
+from kinemaforge_opt.spatial import exp_so3, make_transform, normalize
+
+BOX = np.array([0.4, 0.02, 0.6])  # door slab size [m]
+
+
+def box_surface(size: np.ndarray, center: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points on the faces of an axis-aligned box on a regular grid, with exact outward normals."""
+    pts, nrm = [], []
+    half = size / 2
+    for axis in range(3):
+        u, w = [a for a in range(3) if a != axis]
+        gu = np.arange(-half[u], half[u] + 1e-12, spacing)
+        gw = np.arange(-half[w], half[w] + 1e-12, spacing)
+        U, W = np.meshgrid(gu, gw, indexing="ij")
+        for sign in (-1.0, 1.0):
+            p = np.zeros((U.size, 3))
+            p[:, u], p[:, w], p[:, axis] = U.ravel(), W.ravel(), sign * half[axis]
+            nn = np.zeros_like(p)
+            nn[:, axis] = sign
+            pts.append(p + center)
+            nrm.append(nn)
+    return np.concatenate(pts), np.concatenate(nrm)
+
+
+def door_model(axis_world, origin_world, kind: str = "revolute", damping: float = 0.0, pitch: float = 0.0) -> ArticulatedModel:
+    """Base (the world) + one box door on a joint through ``origin_world`` along ``axis_world``.
+    The door's link frame is the joint frame at q = 0 (world-aligned, at the origin)."""
+    center = np.asarray(origin_world) + np.array([BOX[0] / 2 + 0.01, 0.0, 0.0])
+    m = 3.0
+    I = m / 12 * np.diag([BOX[1] ** 2 + BOX[2] ** 2, BOX[0] ** 2 + BOX[2] ** 2, BOX[0] ** 2 + BOX[1] ** 2])
+    links = (Link("base"), Link("door", Inertial(m, center - origin_world, I)))
+    joint = Joint("hinge", kind, "base", "door", make_transform(np.eye(3), np.asarray(origin_world, float)),
+                  normalize(np.asarray(axis_world, float)), pitch, JointLimits(-2.0, 2.0), JointDynamics(damping=damping))
+    return ArticulatedModel("door", links, (joint,))
+
+
+def door_surface_world(model: ArticulatedModel, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """The door's exact surface at q = 0 (world)."""
+    j = model.joint("hinge")
+    center = j.T_parent_joint[:3, 3] + model.link("door").inertial.com
+    return box_surface(BOX, center, spacing)
+
+
+def moved(model: ArticulatedModel, q: float, pts: np.ndarray, nrm: np.ndarray | None = None):
+    """Points (and normals) of the door at joint value q (world)."""
+    j = model.joint("hinge")
+    a = j.axis
+    o = j.T_parent_joint[:3, 3]
+    if j.type == "prismatic":
+        return pts + q * a, nrm
+    R = exp_so3(a * q)
+    out = (pts - o) @ R.T + o + (j.pitch * q * a if j.type == "helical" else 0.0)
+    return out, (None if nrm is None else nrm @ R.T)
+
+
+def exact_data(true: ArticulatedModel, init: ArticulatedModel, times: np.ndarray, q_true: np.ndarray,
+               q_init: np.ndarray, spacing: float = 0.02, wrenches: Wrenches | None = None, rng=None) -> ScrewData:
+    """ScrewData with the exact surface of ``true`` and exact observed points (a random subset
+    of a finer surface sampling, different at each step) of it moved to ``q_true``."""
+    rng = rng or np.random.default_rng(0)
+    S, Nrm = door_surface_world(true, spacing)
+    fine, _ = door_surface_world(true, spacing / 2.3)
+    obs = []
+    for q in q_true:
+        pts = fine[rng.choice(len(fine), 400, replace=False)]
+        obs.append(moved(true, q, pts)[0])
+    pushed = None if wrenches is None else np.array(["door"] * wrenches.t.size, dtype=object)
+    return ScrewData(init, times, q_init[:, None], {"door": obs}, {"door": SurfaceModel("door", S, Nrm)},
+                     delta=0.002, gate=0.05, wrenches=wrenches, pushed_link=pushed)
+
+
+def pushed_trajectory(model: ArticulatedModel, duration: float, hz: float, push_s: float, force: float):
+    """Integrate the door pushed at its far edge by a force of ``force`` [N] normal to the door for
+    ``push_s`` [s] (then released), with pinocchio's numeric ABA and the model's damping.  Returns
+    (t (N,), q (N,), wrenches sampled at ``hz``)."""
+    pm = build_pin_model(model)
+    pd = pm.createData()
+    j = model.joint("hinge")
+    o, a = j.T_parent_joint[:3, 3], j.axis
+    grip0 = o + np.array([BOX[0], -BOX[1] / 2, 0.0])  # far edge, front face
+    b = model.joint("hinge").dynamics.damping
+
+    def wrench(t, q):
+        R = exp_so3(a * q)
+        p = (grip0 - o) @ R.T + o
+        f = (R @ np.array([0.0, 1.0, 0.0])) * (force if t < push_s else 0.0)
+        return p, f
+
+    def rhs(t, x):
+        p, f = wrench(t, x[0])
+        tau = a @ np.cross(p - o, f) - b * x[1]
+        return [x[1], pin.aba(pm, pd, np.array([x[0]]), np.array([x[1]]), np.array([tau]))[0]]
+
+    t = np.arange(0.0, duration + 1e-9, 1.0 / hz)
+    sol = solve_ivp(rhs, (0, duration), [0.0, 0.0], t_eval=t, rtol=1e-10, atol=1e-12, max_step=0.01)
+    q = sol.y[0]
+    pf = [wrench(tt, qq) for tt, qq in zip(t, q)]
+    return t, q, sol.y[1], Wrenches(t, np.array([p for p, _ in pf]), np.array([f for _, f in pf]))
