@@ -38,6 +38,12 @@ MIN_EFFECT_SIZE_SIGMA = 1.0
 # A hypothesis whose fit has not converged after this many IPOPT iterations is not accepted
 # (well-posed candidates converge in 5–30).
 CANDIDATE_MAX_ITER = 100
+STATES_FROM_DATA = True
+EFFECTIVE_N = True
+# Two hypotheses whose fits differ by less than this in log-likelihood (2 ln L on the effective
+# sample count) explain the recording equally well ("not worth more than a bare mention",
+# Kass & Raftery 1995): the chosen one is reported with the other as an equivalent explanation.
+EQUIVALENT_LOGLIK = 2.0
 
 # Effect types tested, in order; the parameters freed for each are its EFFECTS[type].params
 # (first = reported value).
@@ -141,13 +147,46 @@ def _free_for(model: ArticulatedModel, joint: str, effect: str) -> list[str]:
 
 
 def delta_bic_q(q_richer: np.ndarray, q_simpler: np.ndarray, q_rec: np.ndarray, extra_params: int,
-                sigma_q: np.ndarray) -> float:
-    """BIC(richer) - BIC(simpler) of two fitted trajectories (T, n) of the recording ``q_rec``
-    (see :func:`delta_bic`)."""
-    rss1 = float(np.sum(((q_richer - q_rec) / sigma_q) ** 2))
+                sigma_q: np.ndarray, effective: bool = True) -> tuple[float, float]:
+    """(BIC(richer) - BIC(simpler), rho) of two fitted trajectories (T, n) of the recording
+    ``q_rec``, BIC = N ln(RSS/N) + k ln N on the noise-normalised output error.
+
+    effective: count N as the number of *independent* residuals, N (1 - rho)/(1 + rho), with rho
+    the lag-1 autocorrelation of the richer fit's residuals (per joint series, pooled): white
+    residuals (a model that explains the data to its noise) keep N; residuals that still carry
+    structure (model-form error the library cannot express) count for fewer, so an effect is not
+    accepted for polishing a correlated misfit."""
+    from ..nlp.sensitivity import lag1_autocorrelation
+
+    r1 = (q_richer - q_rec) / sigma_q
+    rss1 = float(np.sum(r1**2))
     rss0 = float(np.sum(((q_simpler - q_rec) / sigma_q) ** 2))
-    n = q_rec.size
-    return float(n * np.log(rss1 / rss0) + extra_params * np.log(n))
+    rho = lag1_autocorrelation(r1.T) if effective else 0.0
+    n = q_rec.size * (1 - rho) / (1 + rho)
+    return float(n * np.log(rss1 / rss0) + extra_params * np.log(n)), rho
+
+
+def _reported_value(model: ArticulatedModel, joint: str, effect: str, values: dict) -> float:
+    """DESIGN.md ``value`` of ``effect`` on ``joint`` from fitted parameter values (tilt: the angle
+    between fitted and nominal axis [rad])."""
+    name = _free_for(model, joint, effect)[0]
+    if effect == "axis_tilt":
+        a = np.asarray(values[name], float)
+        return float(np.arccos(np.clip(abs(np.dot(a / np.linalg.norm(a), model.joint(joint).axis)), -1, 1)))
+    return float(np.asarray(values[name]).ravel()[0])
+
+
+def _rss_q(q_fit: np.ndarray, q_rec: np.ndarray, sigma_q: np.ndarray) -> float:
+    return float(np.sum(((q_fit - q_rec) / sigma_q) ** 2))
+
+
+def effective_count(residuals: np.ndarray) -> float:
+    """Number of independent residuals among ``residuals`` (T, n): N (1 - rho)/(1 + rho), rho the
+    pooled lag-1 autocorrelation of the per-joint series (white noise keeps N)."""
+    from ..nlp.sensitivity import lag1_autocorrelation
+
+    rho = lag1_autocorrelation(np.atleast_2d(residuals.T))
+    return float(residuals.size * (1 - rho) / (1 + rho))
 
 
 def limit_stop_guess(model: ArticulatedModel, rec: Recording) -> dict[str, tuple[float, float]]:
@@ -168,6 +207,11 @@ def limit_stop_guess(model: ArticulatedModel, rec: Recording) -> dict[str, tuple
 def _at_bound_values(trial: Trial, names: list[str]) -> bool:
     """True when the effect's reported parameter sits at its physical lower bound (zero)."""
     name = names[0]
+    if name.endswith(".limit_stop"):  # no stiffness, or a stop pinned at the edge of where it is identifiable
+        lo, hi = (trial.bounds or {}).get(name, (-np.inf, np.inf))
+        stop = trial.values[name][0]
+        at_edge = min(abs(stop - lo), abs(stop - hi)) <= 1e-6 * max(1.0, abs(stop))
+        return bool(abs(trial.z[names[1]][0]) <= 1e-6 or at_edge)
     if name.endswith((".axis", ".inertia_ratio", ".spring_rest", ".bias")):
         return False
     return bool(abs(trial.z[name][0]) <= 1e-6)
@@ -255,24 +299,34 @@ def diagnose(
 
     def trial_of(selected_: list[tuple[str, str]], start: Trial) -> Trial:
         names = [n for j, e in selected_ for n in _free_for(model, j, e)]
-        init = {}
+        init, bounds = {}, {}
         for j, e in selected_:
+            k = model.joint_index(j)
+            if e == "spring":  # rest position: start mid-motion, where the stiffness has leverage
+                init[f"{j}.spring_rest"] = np.array([float(np.mean(fit_rec.q[:, k]))])
             if e == "stribeck_friction":  # a data-derived speed scale: a fifth of the RMS speed
                 init[f"{j}.v_stribeck"] = np.array([0.2 * v_scale[model.joint_index(j)]])
             if e == "limit_contact":  # start in contact, 5 % of the range before the extreme, with a stiffness
                 # whose force over that penetration is the recording's force scale
-                k = model.joint_index(j)
                 span = float(np.ptp(fit_rec.q[:, k]))
+                # A stop is identifiable only if the recording both moves free of it and touches
+                # it: keep it inside the half of the recorded range on its side (else a "stop"
+                # beyond all the data is just a spring).
+                lo, hi = float(fit_rec.q[:, k].min()), float(fit_rec.q[:, k].max())
+                bounds[f"{j}.limit_stop"] = (lo + 0.5 * span, hi) if stops[j][0] > 0 else (lo, hi - 0.5 * span)
                 init[f"{j}.limit_stop"] = np.array([stops[j][1] - stops[j][0] * 0.05 * span])
                 init[f"{j}.limit_stiffness"] = fit_for([(j, e)]).blocks[f"{j}.limit_stiffness"].scale * 0.01 * float(np.std(fit_rec.q[:, k])) / (0.05 * span)
-        contact = selected_[-1][1] == "limit_contact"  # a stop acts where the data went, not the parent fit
-        return fit_for(selected_).solve(names, start=start, init=init, states_from_data=contact)
+        contact = STATES_FROM_DATA or selected_[-1][1] == "limit_contact"  # a stop acts where the data went, not the parent fit
+        return fit_for(selected_).solve(names, start=start, init=init, states_from_data=contact, bounds=bounds)
 
     selected: list[tuple[str, str, float]] = []  # (joint, effect, delta_bic)
+    equivalents: dict[tuple[str, str], list[dict]] = {}
     tested: list[dict] = []
     current = nominal_trial
+    n_res = fit_rec.q.size
     for _ in range(max_effects):
-        best = None
+        rss0 = _rss_q(current.q_fit, fit_rec.q, sigma_q)
+        rows = []
         for joint in model.joint_names:
             for effect in candidates:
                 if any(s[:2] == (joint, effect) for s in selected):
@@ -280,18 +334,42 @@ def diagnose(
                 say(f"testing {effect} on {joint}")
                 trial = trial_of([s[:2] for s in selected] + [(joint, effect)], current)
                 names = _free_for(model, joint, effect)
-                d = delta_bic_q(trial.q_fit, current.q_fit, fit_rec.q, _n_params(names), sigma_q)
                 size = float(np.sqrt(np.mean(((trial.q_fit - current.q_fit) / sigma_q) ** 2)))
-                supported = trial.success and not _at_bound_values(trial, names) and size >= MIN_EFFECT_SIZE_SIGMA
-                tested.append({"joint": joint, "type": effect, "delta_bic": d, "effect_size_sigma": size,
-                               "supported": supported, "iterations": trial.iterations})
-                if supported and (best is None or d < best[2]):
-                    best = (joint, effect, d, trial)
-        if best is None or best[2] >= DELTA_BIC:
+                supported = trial.success and not _at_bound_values(trial, names)
+                rows.append({"joint": joint, "type": effect, "trial": trial, "k": _n_params(names),
+                             "rss": _rss_q(trial.q_fit, fit_rec.q, sigma_q), "effect_size_sigma": size,
+                             "supported": supported})
+        if not rows:
             break
-        joint, effect, d, current = best
-        selected.append((joint, effect, d))
-        say(f"selected {effect} on {joint} (ΔBIC {d:.0f})")
+        # One effective sample count for the whole round (so candidates compare on one scale):
+        # from the residuals of the round's best-fitting supported hypothesis.
+        pool = [r for r in rows if r["supported"]] or rows
+        best_fit = min(pool, key=lambda r: r["rss"])
+        n_eff = effective_count((best_fit["trial"].q_fit - fit_rec.q) / sigma_q) if EFFECTIVE_N else float(n_res)
+        # An effect must move the fit by more than the noise, and by more than what the round's
+        # best hypothesis still leaves unexplained (the noise floor the data and library reach:
+        # the high-frequency noise estimate can be low).
+        floor = max(1.0, float(np.sqrt(best_fit["rss"] / n_res)))
+        for r in rows:
+            r["supported"] = r["supported"] and r["effect_size_sigma"] >= MIN_EFFECT_SIZE_SIGMA * floor
+            r["delta_bic"] = float(n_eff * np.log(r["rss"] / rss0) + r["k"] * np.log(n_eff))
+            tested.append({"joint": r["joint"], "type": r["type"], "delta_bic": r["delta_bic"],
+                           "effect_size_sigma": r["effect_size_sigma"], "supported": r["supported"],
+                           "iterations": r["trial"].iterations, "n_eff": n_eff, "residual_floor_sigma": floor})
+        ok = [r for r in rows if r["supported"]]
+        if not ok:
+            break
+        best = min(ok, key=lambda r: r["delta_bic"])
+        if best["delta_bic"] >= DELTA_BIC:
+            break
+        # Hypotheses that explain the data as well as the chosen one (log-likelihood within
+        # EQUIVALENT_LOGLIK on the same scale) are reported with it: the recording cannot tell them apart.
+        equivalents[(best["joint"], best["type"])] = [
+            {"joint": r["joint"], "type": r["type"], "trial": r["trial"]} for r in ok
+            if r is not best and abs(n_eff * np.log(r["rss"] / best["rss"])) < EQUIVALENT_LOGLIK]
+        current = best["trial"]
+        selected.append((best["joint"], best["type"], best["delta_bic"]))
+        say(f"selected {best['type']} on {best['joint']} (ΔBIC {best['delta_bic']:.0f})")
 
     say("re-fitting with the selected effects")
     final = _calibration(model, fit_rec, current, [s[:2] for s in selected], stops, segment_s, sigma_q)
@@ -306,9 +384,13 @@ def diagnose(
             params["stiffness"] = float(final.estimates[names[1]].value[0])
         if effect == "stribeck_friction":
             params["v_stribeck"] = float(final.estimates[names[1]].value[0])
+        alts = equivalents.get((joint, effect), [])
+        if alts:
+            params["equivalent"] = [{"joint": a["joint"], "type": a["type"],
+                                     "value": _reported_value(model, a["joint"], a["type"], a["trial"].values)}
+                                    for a in alts]
         if effect == "axis_tilt":
-            nominal_axis = model.joint(joint).axis
-            value = float(np.arccos(np.clip(abs(np.dot(e.value, nominal_axis)), -1, 1)))
+            value = _reported_value(model, joint, effect, {names[0]: e.value})
             params["axis_world"] = _axis_world(final.model, joint).tolist()
             half = e.ci95_angle_rad or 0.0
             found.append(FoundEffect(joint, effect, value, "rad", (max(value - half, 0.0), value + half), d, params))

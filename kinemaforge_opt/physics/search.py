@@ -49,6 +49,7 @@ class Trial:
     status: str
     iterations: int
     solve_time_s: float
+    bounds: dict = None  # physical (lower, upper) overrides the solve used
 
 
 def _ccs_order(rows: np.ndarray, cols: np.ndarray, nrow: int) -> np.ndarray:
@@ -261,11 +262,13 @@ class HypothesisFit:
         return b.nominal / b.scale
 
     def solve(self, free: list[str] | tuple[str, ...], start: Trial | None = None,
-              init: dict[str, np.ndarray] | None = None, states_from_data: bool = False) -> Trial:
+              init: dict[str, np.ndarray] | None = None, states_from_data: bool = False,
+              bounds: dict[str, tuple[float, float]] | None = None) -> Trial:
         """Fit the hypothesis whose free parameters are ``free`` (the others fixed at nominal),
         starting from ``start`` (its states and shared parameters) and physical ``init`` values.
         states_from_data: start the states from the recording instead of ``start``'s trajectory
-        (for effects that act only where the recording went but the parent's fit did not)."""
+        (for effects that act only where the recording went but the parent's fit did not).
+        bounds: physical (lower, upper) replacing a free block's bounds."""
         free = tuple(free)
         unknown = [n for n in free if n not in self.blocks]
         if unknown:
@@ -286,7 +289,9 @@ class HypothesisFit:
                 if init and name in init:
                     z0 = np.asarray(init[name], float) / b.scale
                 w0[sl] = z0
-                lbw[sl], ubw[sl] = b.lower / b.scale, b.upper / b.scale
+                lo, hi = (bounds or {}).get(name, (b.lower, b.upper))
+                lbw[sl], ubw[sl] = np.asarray(lo, float) / b.scale, np.asarray(hi, float) / b.scale
+                w0[sl] = np.clip(w0[sl], lbw[sl], ubw[sl])
             else:
                 w0[sl] = lbw[sl] = ubw[sl] = self.nominal_z(name)
                 if name.endswith(".axis"):  # |axis| = 1 holds identically: do not impose it
@@ -308,4 +313,4 @@ class HypothesisFit:
                 v = v / np.linalg.norm(v)
             values[name] = v
         return Trial(free, values, X[:n, ::m].T.copy(), X, z, bool(stats.get("success", False)),
-                     str(stats.get("return_status", "")), int(stats.get("iter_count", -1)), elapsed)
+                     str(stats.get("return_status", "")), int(stats.get("iter_count", -1)), elapsed, dict(bounds or {}))
