@@ -101,7 +101,7 @@ def drift(
     return DriftReport(h, drift_m, max_drift, rms, h > t_rec[-1], sim, q_ref)
 
 
-INITIAL_WINDOW_S = 0.5
+INITIAL_WINDOW_S = 0.25
 """Span of the recording's start that :func:`fit_initial_velocity` matches [s]."""
 
 

@@ -8,7 +8,7 @@ motion the reconstruction measured:
    wrenches: no τ, a free response from the first measured state);
 2. the replay (:func:`.drift.drift`): Drake from the first measured q, under the full-rate τ, on
    the discrete 1 ms plant (joint limits enforced); the initial velocity is the one whose replay
-   best matches the first 0.5 s (:func:`.drift.fit_initial_velocity`: finite differences of q
+   best matches the first 0.25 s (:func:`.drift.fit_initial_velocity`: finite differences of q
    at a visual rate are too coarse a velocity);
 3. drift at each horizon h = 1, 5, 10, 20, 50 s after the first time step: the largest distance
    between where a moving link's origin or centre of mass is in the replay and where it is in
@@ -39,7 +39,7 @@ from ..io.recording import Recording, write_recording
 from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks, read_tracks, write_tracks
 from ..model import ArticulatedModel, read_urdf
-from .drift import DEFAULT_HORIZONS_S, drift, fit_initial_velocity
+from .drift import DEFAULT_HORIZONS_S, DriftReport, drift, fit_initial_velocity
 from .energy import energy_residual
 from .forcing import JointRecording, joint_recording
 from .plot import plot_trajectories
@@ -116,6 +116,36 @@ def reconstruction_recording(
     return joint_recording(model, tracks, link_tracks(doc, str(out / "reconstruction.json")), seq.wrenches, clouds)
 
 
+def replay_check(model: ArticulatedModel, jr: JointRecording, horizons_s=DEFAULT_HORIZONS_S,
+                 discrete: bool = True) -> tuple[dict, DriftReport]:
+    """Steps 2-4 of the module docs for ``model`` on the joint recording ``jr``: (JSON-ready
+    {drift_m, energy_residual, drift_definition, beyond_recording, max_drift_m, joint_rms, v0},
+    the :class:`~.drift.DriftReport`)."""
+    rec = jr.recording
+    v0 = fit_initial_velocity(model, rec, jr.forcing, discrete=discrete)
+    report = drift(model, rec, horizons_s, discrete=discrete, forcing=jr.forcing, v0=v0)
+    return {
+        "drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
+        "energy_residual": float(energy_residual(model, rec)),
+        "drift_definition": DRIFT_DEFINITION,
+        "beyond_recording": {_key(h): bool(b) for h, b in zip(report.horizons_s, report.beyond_recording)},
+        "max_drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.max_drift_m)},
+        "joint_rms": {_key(h): float(d) for h, d in zip(report.horizons_s, report.joint_rms)},
+        "v0": v0.tolist(),
+    }, report
+
+
+def verify_model(model: ArticulatedModel, out: str | os.PathLike, sequence: str | os.PathLike,
+                 horizons_s=DEFAULT_HORIZONS_S, discrete: bool = True) -> dict:
+    """The same check for another model of the reconstruction in ``out`` (e.g. the one diagnosis
+    augmented; its joints must be the reconstruction's): the measured motion and forcing of
+    ``out`` and ``sequence``, replayed with ``model``.  Writes nothing; returns
+    :func:`replay_check`'s dict."""
+    base, doc = load_reconstruction(out)
+    jr = reconstruction_recording(out, sequence, model, doc)
+    return replay_check(model, jr, horizons_s, discrete)[0]
+
+
 def verify_reconstruction(
     out: str | os.PathLike,
     sequence: str | os.PathLike,
@@ -141,23 +171,15 @@ def verify_reconstruction(
     jr = reconstruction_recording(out, sequence, model, doc, tracks, clouds)
     rec = jr.recording
     write_recording(out / "recording.csv", rec)
-    v0 = fit_initial_velocity(model, rec, jr.forcing, discrete=discrete)
-    report = drift(model, rec, horizons_s, discrete=discrete, forcing=jr.forcing, v0=v0)
-    residual = energy_residual(model, rec)
+    checked, report = replay_check(model, jr, horizons_s, discrete)
     sim = report.simulated
     write_recording(out / "replay.csv", Recording(sim.t + rec.t[0], sim.joint_names, sim.q, sim.v))
     plot_trajectories(out / "trajectories.png", report.simulated, rec.t - rec.t[0], rec.q,
                       title=f"{model.name}: measured (dots) vs Drake replay")
     result = {
-        "drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
-        "energy_residual": float(residual),
-        "drift_definition": DRIFT_DEFINITION,
-        "beyond_recording": {_key(h): bool(b) for h, b in zip(report.horizons_s, report.beyond_recording)},
-        "max_drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.max_drift_m)},
-        "joint_rms": {_key(h): float(d) for h, d in zip(report.horizons_s, report.joint_rms)},
+        **checked,
         "recording_duration_s": float(rec.t[-1] - rec.t[0]),
         "zero_step_t_s": float(rec.t[jr.values.zero_step]),
-        "v0": v0.tolist(),
         "forcing": "wrenches.csv" if jr.forcing is not None else "none (free response)",
         "contacts": [] if jr.wrenches is None else [
             {"link": link, "t_s": [float(jr.wrenches.t[a]), float(jr.wrenches.t[b])]}
