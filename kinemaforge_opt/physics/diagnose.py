@@ -204,8 +204,10 @@ def limit_stop_guess(model: ArticulatedModel, rec: Recording) -> dict[str, tuple
     return out
 
 
-def _at_bound_values(trial: Trial, names: list[str]) -> bool:
-    """True when the effect's reported parameter sits at its physical lower bound (zero)."""
+def _at_bound_values(trial: Trial, names: list[str], nominal_z: dict) -> bool:
+    """True when the effect's reported parameter sits at its physical lower bound (zero) where the
+    model already had it (the fit did not move it: it explains nothing); a parameter the model
+    had non-zero and the data drives to zero is a finding."""
     name = names[0]
     if name.endswith(".limit_stop"):  # no stiffness, or a stop pinned at the edge of where it is identifiable
         lo, hi = (trial.bounds or {}).get(name, (-np.inf, np.inf))
@@ -214,7 +216,7 @@ def _at_bound_values(trial: Trial, names: list[str]) -> bool:
         return bool(abs(trial.z[names[1]][0]) <= 1e-6 or at_edge)
     if name.endswith((".axis", ".inertia_ratio", ".spring_rest", ".bias")):
         return False
-    return bool(abs(trial.z[name][0]) <= 1e-6)
+    return bool(abs(trial.z[name][0]) <= 1e-6 and abs(nominal_z[name][0]) <= 1e-6)
 
 
 def _calibration(model: ArticulatedModel, rec: Recording, trial: Trial, effects: list[tuple[str, str]],
@@ -293,6 +295,7 @@ def diagnose(
         return search["axis"]
 
     nominal_trial = search["base"].solve([])
+    nominal_z = {n: search["base"].nominal_z(n) for n in search["base"].blocks}
     nominal = _calibration(model, fit_rec, nominal_trial, [], stops, segment_s, sigma_q)
     mismatch = locate(model, fit_rec, nominal.q_fit, sigma_q)
     v_scale = np.sqrt(np.mean(velocity_estimate(fit_rec) ** 2, axis=0))
@@ -335,8 +338,9 @@ def diagnose(
                 trial = trial_of([s[:2] for s in selected] + [(joint, effect)], current)
                 names = _free_for(model, joint, effect)
                 size = float(np.sqrt(np.mean(((trial.q_fit - current.q_fit) / sigma_q) ** 2)))
-                supported = trial.success and not _at_bound_values(trial, names)
+                supported = trial.success and not _at_bound_values(trial, names, nominal_z)
                 rows.append({"joint": joint, "type": effect, "trial": trial, "k": _n_params(names),
+                             "value": _reported_value(model, joint, effect, trial.values),
                              "rss": _rss_q(trial.q_fit, fit_rec.q, sigma_q), "effect_size_sigma": size,
                              "supported": supported})
         if not rows:
@@ -353,9 +357,10 @@ def diagnose(
         for r in rows:
             r["supported"] = r["supported"] and r["effect_size_sigma"] >= MIN_EFFECT_SIZE_SIGMA * floor
             r["delta_bic"] = float(n_eff * np.log(r["rss"] / rss0) + r["k"] * np.log(n_eff))
-            tested.append({"joint": r["joint"], "type": r["type"], "delta_bic": r["delta_bic"],
+            tested.append({"joint": r["joint"], "type": r["type"], "value": r["value"], "delta_bic": r["delta_bic"],
                            "effect_size_sigma": r["effect_size_sigma"], "supported": r["supported"],
-                           "iterations": r["trial"].iterations, "n_eff": n_eff, "residual_floor_sigma": floor})
+                           "iterations": r["trial"].iterations, "status": r["trial"].status, "n_eff": n_eff,
+                           "residual_floor_sigma": floor})
         ok = [r for r in rows if r["supported"]]
         if not ok:
             break
