@@ -34,7 +34,8 @@ def _cell(stat: dict, spec: str) -> str:
 
 
 def _count(s: dict) -> str:
-    return f"{s['cases']}" + (f" ({s['failed']} failed)" if s["failed"] else "")
+    notes = [f"{s[k]} {k}" for k in ("failed", "skipped") if s.get(k)]
+    return f"{s['cases']}" + (f" ({', '.join(notes)})" if notes else "")
 
 
 def _metric_row(label: str, s: dict) -> list[str]:
@@ -104,7 +105,7 @@ def reconstruction_tables(reco: dict) -> str:
 
     fails = [r for r in reco["records"] if not r["ok"] or r.get("verification_error")]
     if fails:
-        out.append("### Failures\n\n" + "\n".join(
+        out.append("### Failures and skipped runs\n\n" + "\n".join(
             f"- {r['case']} {r['options'] or ''}: {r['error'] or 'verification: ' + r['verification_error']}"
             for r in fails) + "\n")
     out.append(f"Reconstruction part: {reco['total_s']:.0f} s wall (case generation {reco['generation_s']:.0f} s; "

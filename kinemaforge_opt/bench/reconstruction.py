@@ -55,7 +55,8 @@ class RecoSize:
     on every case).  views_sweep / frames_sweep: numbers of views
     and frames for the sensitivity and scaling sweeps (on ``sweep_category`` instance 0, other
     sizes as table1).  energy_weights: values of the energy-weight option (sweep on the ablation
-    cases)."""
+    cases).  budget_s: wall-time budget [s] of the part; runs not started once it is spent are
+    recorded as skipped (in the order Table 1, Table 2, energy weight, views, frames)."""
 
     name: str
     categories: tuple[str, ...]
@@ -71,11 +72,13 @@ class RecoSize:
     frames_sweep: tuple[int, ...]
     energy_weights: tuple[float, ...]
     sweep_category: str = "microwave"
+    budget_s: float | None = None
 
 
 RECO_QUICK = RecoSize("quick", CATEGORIES, (0,), (0,), views=2, frames=12, width=160, height=120,
                       ablation_categories=("microwave",), ablation_instances=(0,),
-                      views_sweep=(1, 2, 4), frames_sweep=(8, 12, 16), energy_weights=(0.1, 1.0, 10.0))
+                      views_sweep=(1, 2, 4), frames_sweep=(8, 12, 16), energy_weights=(0.1, 1.0, 10.0),
+                      budget_s=300.0)
 RECO_FULL = RecoSize("full", CATEGORIES, (0, 1), (0, 1), views=8, frames=20, width=640, height=480,
                      ablation_categories=CATEGORIES, ablation_instances=(0,),
                      views_sweep=(2, 4, 8), frames_sweep=(10, 20, 40), energy_weights=(0.0, 0.1, 1.0, 10.0, 100.0))
@@ -221,8 +224,7 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
     drift = {str(k): float(v) for k, v in (ver.get("drift_m") or {}).items() if v is not None}
     rec.update(
         part_iou=m.mean_iou, iou_per_part=m.iou, part_match=m.pred_to_true, labelled_pixels=m.n_pixels,
-        axis_error_deg=None if any(a is None for a in ax) else float(np.mean(ax)),
-        origin_error_m=None if not org or any(o is None for o in org) else float(np.mean(org)),
+        axis_error_deg=_mean_or_none(ax), origin_error_m=_mean_or_none(org),
         missed_joints=sum(s.est_joint is None for s in scores),
         joints_found=float(np.mean([s.est_joint is not None for s in scores])) if scores else None,
         type_accuracy=float(np.mean([s.type_correct for s in scores])) if scores else None,
@@ -235,19 +237,32 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
     return rec
 
 
+def _mean_or_none(values) -> float | None:
+    """Mean of the values that are not None (the matched joints); None when none is."""
+    v = [x for x in values if x is not None]
+    return float(np.mean(v)) if v else None
+
+
 # --- the runner --------------------------------------------------------------------------------
 
 class _Runs:
     """Memo of scored reconstructions keyed by (case name, options): a Table 1 run is reused as
-    Table 2's "full" row and as a point of the sweeps."""
+    Table 2's "full" row and as a point of the sweeps.  Once ``budget_s`` of wall time is spent,
+    further new runs are not made: they return a record with ``skipped`` set, which the tables
+    leave out and list."""
 
-    def __init__(self, out_dir: Path, cache: Path, say):
+    def __init__(self, out_dir: Path, cache: Path, say, budget_s: float | None = None):
         self.out, self.cache, self.say, self.memo = out_dir, cache, say, {}
         self.generation_s = 0.0
+        self.budget_s, self.t0 = budget_s, time.perf_counter()
 
     def __call__(self, case, options: dict | None = None) -> dict:
         options = dict(options or {})
         key = (case.name, json.dumps(options, sort_keys=True))
+        if key not in self.memo and self.budget_s is not None and time.perf_counter() - self.t0 > self.budget_s:
+            self.memo[key] = {"case": case.name, "category": case.category, "views": case.views, "frames": case.frames,
+                              "options": options, "ok": False, "skipped": True,
+                              "error": f"skipped: the time budget of {self.budget_s:.0f} s was spent"}
         if key not in self.memo:
             t0 = time.perf_counter()
             root = cached_case(case, self.cache)
@@ -266,9 +281,11 @@ COUNT_FAILURES = ("joints_found", "type_accuracy", "topology_correct")
 def summarise(records: list[dict]) -> dict:
     """Mean ± std (population) and count of each metric over the successful records (over all
     records for :data:`COUNT_FAILURES`, a failure scoring 0), the number of failures and their
-    errors, and the mean wall time."""
+    errors, and the mean wall time.  Skipped records (time budget) are only counted."""
+    skipped = sum(bool(r.get("skipped")) for r in records)
+    records = [r for r in records if not r.get("skipped")]
     ok = [r for r in records if r["ok"]]
-    out = {"cases": len(records), "failed": len(records) - len(ok),
+    out = {"cases": len(records), "failed": len(records) - len(ok), "skipped": skipped,
            "errors": sorted({r["error"] for r in records if not r["ok"]}),
            "mean_wall_s": float(np.mean([r["wall_s"] for r in records])) if records else None}
     for k in METRICS:
@@ -306,7 +323,7 @@ def run_reconstruction(size: RecoSize, out_dir: str | Path, cache: Path | None =
 
     say = progress or (lambda s: None)
     t_start = time.perf_counter()
-    runs = _Runs(Path(out_dir) / "reconstruction", cache or cache_root(), say)
+    runs = _Runs(Path(out_dir) / "reconstruction", cache or cache_root(), say, size.budget_s)
     base = dict(views=size.views, frames=size.frames, width=size.width, height=size.height)
 
     # Table 1
@@ -340,7 +357,7 @@ def run_reconstruction(size: RecoSize, out_dir: str | Path, cache: Path | None =
     sweep = dict(base)
     views_recs = [runs(protocol_case(size.sweep_category, 0, 0, **{**sweep, "views": v})) for v in size.views_sweep]
     frames_recs = [runs(protocol_case(size.sweep_category, 0, 0, **{**sweep, "frames": f})) for f in size.frames_sweep]
-    views = [{"views": r["views"], **summarise([r])} for r in views_recs]
+    views = [{"views": r["views"], **summarise([r])} for r in views_recs if not r.get("skipped")]
 
     scaling = {"frames": _stage_times(frames_recs, "frames"), "views": _stage_times(views_recs, "views"),
                "joints": _stage_times(t1, "n_joints")}

@@ -119,6 +119,15 @@ def test_a_failing_reconstruction_is_a_record(tiny_root, tmp_path, monkeypatch):
     assert s["axis_error_deg"] == {"mean": 3.0, "std": 0.0, "n": 1}  # and is left out of the errors
 
 
+def test_time_budget_skips_new_runs_and_tables_leave_them_out(tmp_path):
+    runs = R._Runs(tmp_path / "out", tmp_path / "cache", lambda s: None, budget_s=0.0)
+    rec = runs(TINY)
+    assert rec["skipped"] and "time budget of 0 s" in rec["error"]
+    assert not (tmp_path / "cache").exists()  # nothing generated, nothing reconstructed
+    s = R.summarise([rec])
+    assert (s["cases"], s["failed"], s["skipped"]) == (0, 0, 1)
+
+
 def test_option_support_names_missing_options():
     assert R.option_support({"method": "greedy"}) is None
     assert "no_such_switch" in R.option_support({"no_such_switch": False})
