@@ -131,7 +131,8 @@ def plot_drift(reco: dict, path: Path) -> Path | None:
         return None
     plt = _plt()
     fig, ax = plt.subplots(figsize=(5, 4))
-    recs = [r for r in reco["records"] if r["ok"] and r.get("drift_m") and r["options"] == {}]
+    t1 = set(reco.get("table1_cases", []))
+    recs = [r for r in reco["records"] if r["ok"] and r.get("drift_m") and r["options"] == {} and r["case"] in t1]
     for r in recs:
         x = [float(h) for h in r["drift_m"]]
         ax.plot(x, list(r["drift_m"].values()), "-", color="0.8", lw=0.8)
@@ -198,6 +199,13 @@ def plot_stage_scaling(reco: dict, path: Path) -> Path | None:
             x, y = np.array(s["x"], float), np.array(s["time_s"], float)
             lab = stage + ("" if s["exponent"] is None else f" (p = {s['exponent']:.2f})")
             ax.loglog(x, y, "o-", color=f"C{i % 10}", label=lab, lw=2 if stage == "total" else 1)
+        xs = sorted({x for s in sweep.values() for x in s["x"]})
+        if xs:
+            from matplotlib.ticker import NullFormatter
+
+            ax.set_xticks(xs)
+            ax.set_xticklabels([str(x) for x in xs])
+            ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(key)
         ax.set_ylabel("time [s]")
         ax.grid(True, which="both", alpha=0.3)

@@ -363,7 +363,7 @@ def run_reconstruction(size: RecoSize, out_dir: str | Path, cache: Path | None =
                "joints": _stage_times(t1, "n_joints")}
     return {
         "size": asdict(size), "seed_paper": SEED_TABLE1, "table1": table1, "table2": table2,
-        "drift_vs_horizon": drift, "sensitivity": {"energy_weight": energy, "views": views},
+        "table1_cases": [r["case"] for r in t1], "drift_vs_horizon": drift, "sensitivity": {"energy_weight": energy, "views": views},
         "scaling": scaling, "records": list(runs.memo.values()),
         "generation_s": runs.generation_s, "total_s": time.perf_counter() - t_start,
     }
