@@ -78,22 +78,10 @@ def _replay(out: Path, model, rec):
     return replay.t[keep] - rec.t[0], replay.q[keep]
 
 
-def _clouds(out: Path) -> dict:
-    import numpy as np
-
-    path = out / "clouds.npz"
-    if not path.is_file():
-        return {}
-    try:
-        with np.load(path) as z:
-            return {k: z[k] for k in z.files}
-    except (OSError, ValueError) as e:
-        raise InputFileError(f"{path}: not a readable .npz of per-part (N, 3) point arrays ({e})") from None
-
-
 def write_scene(out: str | Path, replay: bool = True) -> Path:
     """Build the scene of the output folder ``out`` (see DESCRIPTION) and write OUT/scene.html."""
     from ..model import read_urdf
+    from ..verify.reconstruction import load_clouds
     from ..viz import build_view
 
     out = Path(out)
@@ -114,7 +102,7 @@ def write_scene(out: str | Path, replay: bool = True) -> Path:
             traj = simulate_at(model, rec.q[0], recorded_velocity(rec)[0], rec.t - rec.t[0],
                                rec if rec.tau is not None else None)
             simulated = (traj.t, traj.q)
-    scene = build_view(model, mesh_dir=out, recorded=recorded, simulated=simulated, clouds=_clouds(out))
+    scene = build_view(model, mesh_dir=out, recorded=recorded, simulated=simulated, clouds=load_clouds(out))
     return scene.save(out / "scene.html")
 
 
