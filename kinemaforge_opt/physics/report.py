@@ -44,6 +44,7 @@ def diagnosis_dict(d: Diagnosis, drift_m: dict | None = None) -> dict:
         "effects": [e.to_dict() for e in d.effects],
         "tested": list(d.tested),
         "fit": fit,
+        "held_out_used_for_selection": d.held_out_used_for_selection,
     }
 
 
