@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..physics.diagnose import STATE_WINDOW_S
 from .baselines import BaselineResult, idls, sindy, split
 from .predict import augmented, predict
 from .recordings import effect_recording
@@ -40,14 +41,30 @@ class CaseScore:
     rms_before: float | None
     rms_after: float | None
     time_s: float
+    equivalent: dict[str, tuple[str, ...]] = None  # found type -> types reported as explaining the data as well
+    class_scores: tuple[int, int, int] = None  # (TP, FP, missed) crediting equivalent explanations
 
 
 def _score(case: str, method: str, truth: dict[str, float], found: dict[str, float],
-           rms: tuple[float | None, float | None], time_s: float) -> CaseScore:
+           rms: tuple[float | None, float | None], time_s: float,
+           equivalent: dict[str, dict[str, float]] | None = None) -> CaseScore:
+    """Strict scores (a found type must equal a true type), and class scores: a found effect
+    reported with equivalent explanations (``equivalent``: found type -> {type: value}) counts
+    as a true positive when the truth is any member of its class."""
     tp = set(truth) & set(found)
     err = {t: abs(found[t] - truth[t]) / abs(truth[t]) for t in sorted(tp)}
+    equivalent = equivalent or {}
+    matched, fp = set(), 0
+    for t in found:
+        cls = {t: found[t], **equivalent.get(t, {})}
+        hit = next((c for c in cls if c in truth and c not in matched), None)
+        if hit is None:
+            fp += 1
+        else:
+            matched.add(hit)
     return CaseScore(case, method, tuple(sorted(truth)), tuple(sorted(found)), len(tp), len(set(found) - tp),
-                     len(set(truth) - tp), err, rms[0], rms[1], time_s)
+                     len(set(truth) - tp), err, rms[0], rms[1], time_s,
+                     {t: tuple(sorted(v)) for t, v in equivalent.items()}, (len(matched), fp, len(set(truth) - matched)))
 
 
 def _baseline_after(model, held, res: BaselineResult) -> float:
@@ -55,8 +72,8 @@ def _baseline_after(model, held, res: BaselineResult) -> float:
 
     ratios = {j: 1.0 - c["id"] for j, c in res.coefs.items() if c.get("id", 0.0) != 0.0 and c["id"] < 1.0}
     laws = {j: force_law(res.libraries[j], c) for j, c in res.coefs.items() if any(c.values())}
-    q = predict(augmented(model, ratios), held, laws)
-    return float(np.sqrt(np.mean((q - held.q) ** 2)))
+    q = predict(augmented(model, ratios), held, laws, state_window_s=STATE_WINDOW_S)
+    return float(np.sqrt(np.nanmean((q - held.q) ** 2)))
 
 
 def run_case(case: str, noise_seed: int = 0) -> list[CaseScore]:
@@ -70,8 +87,10 @@ def run_case(case: str, noise_seed: int = 0) -> list[CaseScore]:
     d = diagnose(er.model, er.recording, holdout_fraction=HOLDOUT)
     t_diag = time.perf_counter() - t0
     rms_before = d.held_out.rms_before if d.held_out else None
+    eq = {e.type: {a["type"]: a["value"] for a in e.params.get("equivalent", ()) if a["joint"] == e.joint}
+          for e in d.effects}
     out = [_score(case, "diagnose", truth, {e.type: e.value for e in d.effects},
-                  (rms_before, d.held_out.rms_after if d.held_out else None), t_diag)]
+                  (rms_before, d.held_out.rms_after if d.held_out else None), t_diag, eq)]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # STLSQ warns each time a threshold removes every term
         for fn in (idls, sindy):
@@ -83,8 +102,9 @@ def run_case(case: str, noise_seed: int = 0) -> list[CaseScore]:
 
 
 def summarise(scores: list[CaseScore]) -> dict[str, dict]:
-    """Per method: effect-type precision, recall and F1 (micro over cases), false positives on
-    null cases, median relative value error, median held-out RMS improvement (before / after)."""
+    """Per method: effect-type precision, recall and F1 (micro over cases), F1 crediting reported
+    equivalent explanations (``f1_equivalence_classes``), false positives on null cases, median
+    relative value error, median held-out RMS improvement (before / after)."""
     out = {}
     for m in METHODS:
         s = [x for x in scores if x.method == m]
@@ -93,8 +113,10 @@ def summarise(scores: list[CaseScore]) -> dict[str, dict]:
         tp, fp, fn = (sum(getattr(x, k) for x in s) for k in ("true_positives", "false_positives", "missed"))
         errs = [e for x in s for e in x.value_error.values()]
         gains = [x.rms_before / x.rms_after for x in s if x.rms_before and x.rms_after and x.truth]
+        ctp, cfp, cfn = (sum(x.class_scores[i] for x in s if x.class_scores) for i in range(3))
         out[m] = {
             "cases": len(s),
+            "f1_equivalence_classes": 2 * ctp / (2 * ctp + cfp + cfn) if ctp + cfp + cfn else None,
             "precision": tp / (tp + fp) if tp + fp else None,
             "recall": tp / (tp + fn) if tp + fn else None,
             "f1": 2 * tp / (2 * tp + fp + fn) if tp + fp + fn else None,

@@ -35,9 +35,10 @@ def placeholder_tables() -> str:
 
 
 def discovery_tables(summary: dict, cases: list[dict]) -> str:
-    head = ["method", "cases", "precision", "recall", "F1", "FP on null cases", "median value error",
-            "median held-out RMS gain", "mean time [s]"]
+    head = ["method", "cases", "precision", "recall", "F1", "F1 (equivalent explanations credited)",
+            "FP on null cases", "median value error", "median held-out RMS gain", "mean time [s]"]
     rows = [[m, str(s["cases"]), _fmt(s["precision"], ".2f"), _fmt(s["recall"], ".2f"), _fmt(s["f1"], ".2f"),
+             _fmt(s.get("f1_equivalence_classes"), ".2f"),
              str(s["null_false_positives"]), _fmt(s["median_value_error"], ".1%"),
              _fmt(s["median_heldout_gain"], ".2f") + "×", _fmt(s["mean_time_s"], ".2f")] for m, s in summary.items()]
     per = [[c["case"], c["method"], ", ".join(c["truth"]) or "(none)", ", ".join(c["found"]) or "(none)",

@@ -44,6 +44,9 @@ EFFECTIVE_N = True
 # sample count) explain the recording equally well ("not worth more than a bare mention",
 # Kass & Raftery 1995): the chosen one is reported with the other as an equivalent explanation.
 EQUIVALENT_LOGLIK = 2.0
+# Held-out prediction: each model's starting state is fitted over this first part of a span [s]
+# (see simulate_recording); the rest of the span is the prediction that is scored.
+STATE_WINDOW_S = 0.3
 
 # Effect types tested, in order; the parameters freed for each are its EFFECTS[type].params
 # (first = reported value).
@@ -477,7 +480,8 @@ def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
 
 
 def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec: Recording, segment_s: float | None) -> HeldOut:
-    """Simulated q of both models on ``rec`` (segment by segment when ``segment_s`` is given)."""
+    """Simulated q of both models on ``rec`` (segment by segment when ``segment_s`` is given),
+    each from its own best state over the first ``STATE_WINDOW_S`` of a segment, scored after it."""
     edges = [rec.t[0]] if not segment_s else list(np.arange(rec.t[0], rec.t[-1], segment_s))
     edges.append(rec.t[-1] + 1e-9)
     parts_b, parts_a = [], []
@@ -488,10 +492,10 @@ def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec:
             parts_a.append(parts_b[-1])
             continue
         seg = rec.window(rec.t[m][0], rec.t[m][-1])
-        parts_b.append(simulate_recording(before, seg))
-        parts_a.append(simulate_recording(after, seg))
+        parts_b.append(simulate_recording(before, seg, state_window_s=STATE_WINDOW_S))
+        parts_a.append(simulate_recording(after, seg, state_window_s=STATE_WINDOW_S))
     q_b, q_a = np.vstack(parts_b), np.vstack(parts_a)
-    ok = ~np.isnan(q_b).any(axis=1)
+    ok = ~(np.isnan(q_b).any(axis=1) | np.isnan(q_a).any(axis=1))
     return HeldOut(rec.t[ok], rec.q[ok], q_b[ok], q_a[ok])
 
 
@@ -506,12 +510,21 @@ def _axis_world(model: ArticulatedModel, joint: str) -> np.ndarray:
     return pd.oMi[pm.getJointId(joint)].rotation @ j.axis
 
 
-def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | None = None) -> np.ndarray:
-    """q (T, n) of ``model`` simulated over ``rec`` from its smoothed first state under its
-    recorded tau, with the model's joint dynamics plus optional per-joint ``extra`` force laws
-    f(q, v) [N·m or N].  Pinocchio ABA, integrated by LSODA (scipy)."""
+def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | None = None,
+                       state_window_s: float | None = None) -> np.ndarray:
+    """q (T, n) of ``model`` simulated over ``rec`` under its recorded tau, with the model's joint
+    dynamics plus optional per-joint ``extra`` force laws f(q, v) [N·m or N].  Pinocchio ABA,
+    integrated by LSODA (scipy).
+
+    The initial state is the smoothed first state of the recording, or, with ``state_window_s``
+    [s], the state that best reproduces (least squares) the model's motion over the first
+    ``state_window_s`` of the recording — each model gets its own best starting state, as an
+    observer would give it; those samples are then fitted, not predicted, and come back as NaN.
+    (A state differentiated from a few noisy samples at the edge of a span can be so far off
+    that it dominates the prediction error of every model alike.)"""
     import pinocchio as pin
     from scipy.integrate import solve_ivp
+    from scipy.optimize import least_squares
 
     from ..model.pinocchio import build_pin_model
     from .locate import smooth_derivatives
@@ -531,9 +544,24 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
               for k, (j, f) in enumerate(zip(joints, laws))]
         return np.concatenate([v, pin.aba(pm, pd, q, v, u)])
 
-    sol = solve_ivp(rhs, (rec.t[0], rec.t[-1]), np.concatenate([q0[0], v0[0]]), t_eval=rec.t,
-                    method="LSODA", rtol=1e-7, atol=1e-9)
-    q = sol.y[:n].T
-    if q.shape[0] < rec.t.size:  # integration stopped early: hold the last state
-        q = np.vstack([q, np.repeat(q[-1:], rec.t.size - q.shape[0], axis=0)])
+    def run(x0: np.ndarray, t_eval: np.ndarray) -> np.ndarray:
+        sol = solve_ivp(rhs, (t_eval[0], t_eval[-1]), x0, t_eval=t_eval, method="LSODA", rtol=1e-7, atol=1e-9)
+        q = sol.y[:n].T
+        if q.shape[0] < t_eval.size:  # integration stopped early: hold the last state
+            q = np.vstack([q, np.repeat(q[-1:], t_eval.size - q.shape[0], axis=0)])
+        return q
+
+    x0 = np.concatenate([q0[0], v0[0]])
+    window = np.zeros(rec.t.size, dtype=bool)
+    if state_window_s:
+        window = rec.t <= rec.t[0] + state_window_s
+        if window.sum() >= max(5, 2 * n + 1) and window.sum() < rec.t.size:
+            tw = rec.t[window]
+            scale = np.concatenate([np.full(n, 1.0), np.full(n, 1.0 / max(tw[-1] - tw[0], 1e-9))])
+            fit = least_squares(lambda z: (run(z * scale, tw) - rec.q[window]).ravel(), x0 / scale, method="lm")
+            x0 = fit.x * scale
+        else:
+            window[:] = False
+    q = run(x0, rec.t)
+    q[window] = np.nan
     return q
