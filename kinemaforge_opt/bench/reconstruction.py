@@ -165,14 +165,48 @@ def true_pixel_labels(case_root: Path, seq, frames: dict[int, np.ndarray]) -> di
 
 # --- one reconstruction, scored ----------------------------------------------------------------
 
-def option_support(options: dict) -> str | None:
-    """None if ``reconstruct_sequence`` accepts every keyword in ``options``, else the reason
-    (naming the missing options)."""
+# parameter names under which reconstruct_sequence may take the NLP's ScrewOptions
+_SCREW_PARAMS = ("screw_options", "nlp_options", "screw", "refine_options")
+# switches that may be given to the NLP through its ScrewOptions: switch -> (field, value map)
+_SCREW_FIELDS = {"coarse_to_fine": ("coarse_to_fine", None), "energy": ("energy", {False: "off", True: "soft"}),
+                 "energy_weight": ("energy_weight", None)}
+# a switch off the NLP: parameter names it may have
+_NLP_PARAMS = {"nlp": ("nlp", "refine")}
+
+
+def resolve_options(options: dict) -> tuple[dict | None, str | None]:
+    """Translate the benchmark's switches (:data:`ABLATIONS`, :data:`ENERGY_WEIGHT_OPTION`) into
+    keyword arguments of the installed ``reconstruct_sequence``: a keyword of the same name; for
+    ``nlp`` also ``refine``; for coarse_to_fine / energy / energy_weight also a field of the NLP's
+    ``ScrewOptions`` passed as ``screw_options`` (or a like-named parameter).  Returns (kwargs,
+    None), or (None, reason naming the switches it cannot pass)."""
     from ..perception import reconstruct_sequence
 
     params = inspect.signature(reconstruct_sequence).parameters
-    missing = [k for k in options if k not in params]
-    return None if not missing else f"reconstruct_sequence has no option {', '.join(missing)}"
+    kwargs, screw, missing = {}, {}, []
+    screw_param = next((p for p in _SCREW_PARAMS if p in params), None)
+    for k, v in options.items():
+        alias = next((a for a in _NLP_PARAMS.get(k, (k,)) if a in params), None)
+        if alias is not None:
+            kwargs[alias] = v
+        elif k in _SCREW_FIELDS and screw_param is not None:
+            field_name, vmap = _SCREW_FIELDS[k]
+            screw[field_name] = vmap.get(v, v) if vmap else v
+        else:
+            missing.append(k)
+    if missing:
+        return None, f"reconstruct_sequence has no option {', '.join(missing)}"
+    if screw:
+        from ..nlp.reconstruction import ScrewOptions
+
+        kwargs[screw_param] = ScrewOptions(**screw)
+    return kwargs, None
+
+
+def option_support(options: dict) -> str | None:
+    """None if ``reconstruct_sequence`` can take every switch in ``options`` (see
+    :func:`resolve_options`), else the reason (naming the missing switches)."""
+    return resolve_options(options)[1]
 
 
 def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = None, verify: bool = True) -> dict:
@@ -190,7 +224,11 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
            "n_joints": sum(j.type != "fixed" for j in obj_joints), "options": options, "ok": False, "error": None}
     t0, c0 = time.perf_counter(), time.process_time()
     try:
-        r = reconstruct_sequence(case_root / "sequence", out_dir, show_progress=False, **options)
+        kwargs, why = resolve_options(options)
+        if why:
+            raise KeyError(why)
+        rec["call"] = {k: repr(v) for k, v in kwargs.items()}
+        r = reconstruct_sequence(case_root / "sequence", out_dir, show_progress=False, **kwargs)
     except Exception as e:  # noqa: BLE001 — a failure is a result of the benchmark
         rec.update(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0, error=f"{type(e).__name__}: {e}")
         return rec

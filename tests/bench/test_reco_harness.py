@@ -133,6 +133,23 @@ def test_option_support_names_missing_options():
     assert "no_such_switch" in R.option_support({"no_such_switch": False})
 
 
+def test_switches_reach_the_nlp_options(monkeypatch):
+    import kinemaforge_opt.perception as perception
+    from kinemaforge_opt.nlp.reconstruction import ScrewOptions
+
+    def fake(seq_path, out=None, method="graph", refine=True, screw_options=None, show_progress=None):
+        raise AssertionError("not called")
+
+    monkeypatch.setattr(perception, "reconstruct_sequence", fake)
+    assert R.resolve_options({"nlp": False}) == ({"refine": False}, None)
+    kw, _ = R.resolve_options({"energy": False})
+    assert kw["screw_options"] == ScrewOptions(energy="off")
+    kw, _ = R.resolve_options({"coarse_to_fine": False, "method": "greedy"})
+    assert kw == {"method": "greedy", "screw_options": ScrewOptions(coarse_to_fine=False)}
+    assert R.resolve_options({R.ENERGY_WEIGHT_OPTION: 10.0})[0]["screw_options"].energy_weight == 10.0
+    assert R.resolve_options({"jitter": 1})[1] == "reconstruct_sequence has no option jitter"
+
+
 def test_parts_of_the_cli_match_the_runner():
     from kinemaforge_opt.bench.run import PARTS
     from kinemaforge_opt.commands.bench import PARTS as CLI_PARTS
