@@ -54,6 +54,10 @@ CONTACT_JUMP_M = 0.05
 """A wrench point moving further than this between two rows starts a new contact [m] (a hand
 moving 5 cm in one row at ≥ 30 Hz would be faster than 1.5 m/s: it let go and grabbed again)."""
 
+CLOUD_POINTS = 20000
+"""Points per link cloud used for the wrench-to-link distance (evenly strided; a reconstruction's
+cloud holds millions, and the median distance needs only the surface's extent)."""
+
 FORCE_EPS_N = 1e-9
 """Rows whose force norm is at most this [N] apply nothing (they end a contact)."""
 
@@ -185,6 +189,11 @@ def _contacts(w: Wrenches) -> list[tuple[int, int]]:
     return out
 
 
+def _strided(points: np.ndarray, n: int) -> np.ndarray:
+    """At most ``n`` of the (N, 3) ``points``, evenly strided (deterministic)."""
+    return points if len(points) <= n else points[np.linspace(0, len(points) - 1, n).astype(int)]
+
+
 def map_wrenches(
     model: ArticulatedModel,
     t_q: np.ndarray,
@@ -205,7 +214,7 @@ def map_wrenches(
     links = list(model.link_names)
     fids = [pm.getFrameId(name) for name in links]
     P, F = np.asarray(wrenches.points_world, dtype=float), np.asarray(wrenches.forces_world, dtype=float)
-    trees = {name: cKDTree(np.asarray(c, dtype=float)) for name, c in (clouds_world or {}).items()
+    trees = {name: cKDTree(_strided(np.asarray(c, dtype=float), CLOUD_POINTS)) for name, c in (clouds_world or {}).items()
              if name in links and len(c)}
     # every link's pose at q = 0 (the clouds' configuration) and at each row
     T0 = {}
