@@ -23,7 +23,8 @@ outputs (main job):
   OUT/episode/sequence/         the RGB-D sequence (+ wrenches.csv); OUT/episode/ground_truth/
   OUT/reconstruction/           model.urdf, meshes/, reconstruction.json (with "verification"),
                                 recording.csv, replay.csv, trajectories.png, scene.html
-  OUT/diagnosis/                diagnosis.json, model.urdf (augmented), plots
+  OUT/diagnosis/                diagnosis.json, model.urdf (augmented), plots, verification.json
+                                (the augmented model checked in Drake like the reconstruction)
   OUT/demo.json                 the summary
 """
 

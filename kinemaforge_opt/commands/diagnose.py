@@ -36,7 +36,7 @@ def register(sub) -> None:
         "diagnose",
         help="find the physics a model leaves out of a recording, model it, show the fit improve",
         description="Locate where RECORDING.csv and MODEL.urdf disagree, name the missing physics "
-        "with values and 95%% intervals, re-fit, and show the held-out improvement.",
+        "with values and 95% intervals, re-fit, and show the held-out improvement.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
