@@ -15,7 +15,8 @@ motion the reconstruction measured:
    the measured motion.  **Past the end of the recording** (``beyond_recording``) the measured
    motion is its last pose held and the replay keeps the last τ: the drift then says whether the
    model comes to rest where the real object did, the only observation there is;
-4. the energy residual of the measured motion under the model (:func:`.energy.energy_residual`).
+4. the energy residual of the measured motion under the model (:func:`.energy.energy_residual`),
+   evaluated at the force's rate on a cubic spline of the measured q (:func:`fine_motion`).
 
 Outputs in OUT: ``recording.csv`` (the joint-space recording, so ``diagnose`` and ``view`` can use
 it), ``replay.csv`` (the Drake replay, same time base, up to the longest horizon), ``tracks.csv``
@@ -32,6 +33,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 
 from ..errors import InputFileError
 from ..io.atomic import write_text_atomic
@@ -116,6 +118,22 @@ def reconstruction_recording(
     return joint_recording(model, tracks, link_tracks(doc, str(out / "reconstruction.json")), seq.wrenches, clouds)
 
 
+def fine_motion(jr: JointRecording) -> Recording:
+    """The measured motion at the force's rate: q through a cubic spline (not-a-knot) of the measured
+    steps, v its derivative, τ the full-rate forcing, at the forcing's rows inside the measured
+    span (without forcing: at the measured steps, τ none).  The energy books need ∫τ·v dt at the
+    rate the force changes; a ~10 Hz finite-difference v misses most of a 0.8 s push (on a
+    synthetic door with true physics: residual 0.094 at 8 Hz vs 0.019 this way, 0.020 from
+    MuJoCo's own 120 Hz record)."""
+    rec = jr.recording
+    spline = CubicSpline(rec.t, rec.q, axis=0)
+    if jr.forcing is None:
+        return Recording(rec.t, rec.joint_names, rec.q, spline(rec.t, 1))
+    keep = (jr.forcing.t >= rec.t[0]) & (jr.forcing.t <= rec.t[-1])
+    t = jr.forcing.t[keep]
+    return Recording(t, rec.joint_names, spline(t), spline(t, 1), jr.forcing.tau[keep])
+
+
 def replay_check(model: ArticulatedModel, jr: JointRecording, horizons_s=DEFAULT_HORIZONS_S,
                  discrete: bool = True) -> tuple[dict, DriftReport]:
     """Steps 2-4 of the module docs for ``model`` on the joint recording ``jr``: (JSON-ready
@@ -126,7 +144,7 @@ def replay_check(model: ArticulatedModel, jr: JointRecording, horizons_s=DEFAULT
     report = drift(model, rec, horizons_s, discrete=discrete, forcing=jr.forcing, v0=v0)
     return {
         "drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
-        "energy_residual": float(energy_residual(model, rec)),
+        "energy_residual": float(energy_residual(model, fine_motion(jr))),
         "drift_definition": DRIFT_DEFINITION,
         "beyond_recording": {_key(h): bool(b) for h, b in zip(report.horizons_s, report.beyond_recording)},
         "max_drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.max_drift_m)},

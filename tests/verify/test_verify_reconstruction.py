@@ -61,7 +61,7 @@ def test_true_model_replays_mujoco_and_nominal_does_not(door, tmp_path):
     assert drift["true"]["1"] < 0.005 and drift["true"]["50"] < 0.02
     # without its damper the door swings further: the verifier sees it
     assert drift["nominal"]["1"] > 3 * drift["true"]["1"] and drift["nominal"]["1"] > 0.02
-    assert energy["true"] < 0.15 and energy["nominal"] > 3 * energy["true"]
+    assert energy["true"] < 0.05 and energy["nominal"] > 5 * energy["true"]  # 0.019 vs 0.42 when written
 
 
 def test_missing_tracks_are_named(door, tmp_path):
