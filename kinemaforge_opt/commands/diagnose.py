@@ -23,7 +23,8 @@ on a reconstruction (first argument = a folder written by `kinemaforge reconstru
   observed range; a real stop in the data shows as limit_contact); OUT/model.urdf keeps them.
 
 outputs: OUT/diagnosis.json, OUT/model.urdf, OUT/residual_time.png, OUT/residual_state.png,
-         OUT/fit_before_after.png (+ OUT/recording.csv, OUT/meshes/ on a reconstruction)
+         OUT/fit_before_after.png (+ OUT/recording.csv, OUT/meshes/ on a reconstruction, and
+         OUT/verification.json: the augmented model through the reconstruction's Drake check)
 
 examples:
   kinemaforge diagnose models/furuta/furuta.urdf qube.csv -o out/qube
@@ -92,6 +93,18 @@ def run(args) -> int:
         d = dataclasses.replace(d, model=limits_from(d.model, nominal))
     paths = write_diagnosis(d, rec, args.out, with_drift=not args.no_drift)
     print(d.summary())
+    if reconstructed and not args.no_drift:  # the augmented model through the reconstruction's Drake check
+        import json
+        from pathlib import Path
+
+        from ..io.atomic import write_text_atomic
+        from ..verify.reconstruction import verify_model
+
+        after = verify_model(d.model, args.model, args.sequence)
+        paths["verification"] = Path(args.out) / "verification.json"
+        write_text_atomic(paths["verification"], json.dumps(after, indent=2))
+        drift = ", ".join(f"{h} s: {v:.3g}" for h, v in after["drift_m"].items())
+        print(f"Drake check of the augmented model: drift [m] {drift}; energy residual {after['energy_residual']:.3g}")
     print("wrote " + ", ".join(str(p) for p in paths.values()))
     return 0
 
