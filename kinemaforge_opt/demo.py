@@ -101,6 +101,10 @@ def run_demo(out_dir: str | Path, seed: int = 0, noise_rad: float = 2e-3, rate_h
 
 # --- the main job: RGB-D -> URDF -> Drake -> diagnosis -> scene -----------------------------------
 
+class NoJointFound(RuntimeError):
+    """The demo's reconstruction found nothing that moves (a result, not bad input: exit 1)."""
+
+
 DEMO_DAMPING = 0.8
 """The concealed viscous damping of the main demo's door [N·m·s/rad]."""
 
@@ -252,7 +256,8 @@ def run_main_demo(out_dir: str | Path, seed: int = 0, frames: int = DEMO_SIZE["f
     rec = reconstruct_sequence(paths.sequence, rec_dir)
     timing["reconstruct"] = time.perf_counter() - t0
     if not rec.model.movable_joints:
-        raise RuntimeError("the reconstruction found no movable joint; nothing to verify")
+        raise NoJointFound(f"the reconstruction in {rec_dir} found no movable joint: nothing to verify or diagnose "
+                           f"(try more --frames or a larger --size)")
 
     t0 = time.perf_counter()
     say("3/5 verifying in Drake (replay under the recorded hand force) …")

@@ -71,13 +71,19 @@ def _size(text: str | None) -> tuple[int, int]:
 def run(args) -> int:
     if args.joint_space:
         return _joint_space(args)
-    from ..demo import run_main_demo
+    from ..demo import NoJointFound, run_main_demo
 
     width, height = _size(args.size)
     frames = args.frames if args.frames is not None else _default("frames")
     print("kinemaforge demo: RGB-D episode -> reconstruction -> Drake verification -> diagnosis -> scene", flush=True)
-    report = run_main_demo(args.out, seed=args.seed, frames=frames, width=width, height=height,
-                           say=lambda line: print(line, flush=True))
+    try:
+        report = run_main_demo(args.out, seed=args.seed, frames=frames, width=width, height=height,
+                               say=lambda line: print(line, flush=True))
+    except NoJointFound as e:
+        import sys
+
+        print(f"kinemaforge demo: {e}", file=sys.stderr)
+        return 1
     print()
     print(report.summary())
     return 0
