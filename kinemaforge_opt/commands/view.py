@@ -28,6 +28,7 @@ are drawn coloured by part.
 EPILOG = """\
 examples:
   kinemaforge view out/cal                 writes out/cal/scene.html and prints its path
+  kinemaforge view out/rec --serve         the same, and live on a meshcat server
   kinemaforge view out/cal --no-replay     recorded motion only (no Drake)
 """
 
@@ -42,6 +43,8 @@ def register(subparsers) -> None:
     )
     p.add_argument("out", metavar="OUT", help="a folder holding model.urdf (e.g. from calibrate)")
     p.add_argument("--no-replay", action="store_true", help="do not simulate the recording in Drake")
+    p.add_argument("--serve", action="store_true",
+                   help="also show the scene on a live meshcat server (prints its URL; Ctrl-C ends it)")
     p.set_defaults(func=run)
 
 
@@ -78,8 +81,9 @@ def _replay(out: Path, model, rec):
     return replay.t[keep] - rec.t[0], replay.q[keep]
 
 
-def write_scene(out: str | Path, replay: bool = True) -> Path:
-    """Build the scene of the output folder ``out`` (see DESCRIPTION) and write OUT/scene.html."""
+def write_scene(out: str | Path, replay: bool = True, return_scene: bool = False):
+    """Build the scene of the output folder ``out`` (see DESCRIPTION) and write OUT/scene.html;
+    returns its path (and the :class:`~kinemaforge_opt.viz.Scene` with ``return_scene``)."""
     from ..model import read_urdf
     from ..verify.reconstruction import load_clouds
     from ..viz import build_view
@@ -103,9 +107,23 @@ def write_scene(out: str | Path, replay: bool = True) -> Path:
                                rec if rec.tau is not None else None)
             simulated = (traj.t, traj.q)
     scene = build_view(model, mesh_dir=out, recorded=recorded, simulated=simulated, clouds=load_clouds(out))
-    return scene.save(out / "scene.html")
+    path = scene.save(out / "scene.html")
+    return (path, scene) if return_scene else path
 
 
 def run(args) -> int:
-    print(write_scene(args.out, replay=not args.no_replay))
+    path, scene = write_scene(args.out, replay=not args.no_replay, return_scene=True)
+    print(path)
+    if args.serve:
+        import time
+
+        live = scene.serve()
+        print(f"meshcat: {live.url()}  (Ctrl-C to stop)", flush=True)
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            live.window.server_proc.terminate()
     return 0

@@ -48,7 +48,8 @@ from .plot import plot_trajectories
 
 DRIFT_DEFINITION = (
     "max over moving links' origins and centres of mass of |p_replay(t0+h) - p_measured(t0+h)| [m]; "
-    "Drake replay from the first measured state under the recorded forcing; past the recording's end "
+    "Drake replay from the first measured q (initial velocity fitted to the first 0.25 s) under the recorded "
+    "forcing; past the recording's end "
     "the measured pose is its last one, held, and the last applied force is held"
 )
 
@@ -159,7 +160,7 @@ def verify_model(model: ArticulatedModel, out: str | os.PathLike, sequence: str 
     augmented; its joints must be the reconstruction's): the measured motion and forcing of
     ``out`` and ``sequence``, replayed with ``model``.  Writes nothing; returns
     :func:`replay_check`'s dict."""
-    base, doc = load_reconstruction(out)
+    _, doc = load_reconstruction(out)
     jr = reconstruction_recording(out, sequence, model, doc)
     return replay_check(model, jr, horizons_s, discrete)[0]
 

@@ -200,6 +200,18 @@ class Scene:
         """The scene as one self-contained HTML page."""
         return self._window.get_scene()
 
+    def serve(self, zmq_url: str | None = None) -> meshcat.Visualizer:
+        """Send the scene to a live meshcat server and return its :class:`meshcat.Visualizer`
+        (``.url()`` is the page to open).  zmq_url: a running ``meshcat-server``; None starts one
+        as a subprocess, ``vis.window.server_proc``, which the caller ends (``.terminate()``)."""
+        live = meshcat.Visualizer(zmq_url=zmq_url)
+        sock = live.window.zmq_socket
+        for blob in self._window.blobs():
+            data = umsgpack.unpackb(blob)
+            sock.send_multipart([data["type"].encode("utf-8"), data.get("path", "").encode("utf-8"), blob])
+            sock.recv()
+        return live
+
     def save(self, path: str | os.PathLike) -> Path:
         """Write :meth:`html` to ``path`` atomically."""
         path = Path(path)

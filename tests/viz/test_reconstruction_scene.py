@@ -97,3 +97,35 @@ def test_large_clouds_are_strided_to_a_cap():
     assert len(shown) == 1000
     np.testing.assert_allclose(shown[0], P[0], rtol=1e-6)
     np.testing.assert_allclose(shown[-1], P[-1], rtol=1e-6)
+
+
+def test_a_live_meshcat_server_gets_the_same_scene():
+    """serve() replays the scene into a real meshcat server; the server's own static HTML then
+    holds the same objects and the animation."""
+    scene = Scene()
+    model = read_urdf_door()
+    scene.add_point_clouds({"leaf": np.ones((10, 3))})
+    scene.add_model(model, "recorded")
+    t = np.linspace(0, 1, 11)
+    scene.animate(model, {"recorded": (t, t[:, None])})
+    live = scene.serve()
+    try:
+        served = decode_static_html(live.window.get_scene())
+    finally:
+        live.window.server_proc.terminate()
+        live.window.server_proc.wait(timeout=10)
+    ours = decode_static_html(scene.html())
+    paths = lambda cmds: {c["path"] for c in cmds if c["type"] == "set_object"}  # noqa: E731
+    assert paths(served) == paths(ours) and "/meshcat/recorded/frame/joint_hinge/axis/head" in paths(ours)
+    assert any(c["type"] == "set_animation" for c in served)
+
+
+def read_urdf_door():
+    from kinemaforge_opt.model import ArticulatedModel, Geometry, Inertial, Joint, JointLimits, Link
+
+    T = np.eye(4)
+    T[:3, 3] = [0.5, 0.0, 0.0]
+    leaf = Link("leaf", Inertial(3.0, [0.4, 0.0, 0.0], np.diag([0.2, 0.2, 0.2])),
+                visuals=(Geometry("box", np.eye(4), size=(0.8, 0.02, 1.0)),))
+    hinge = Joint("hinge", "revolute", "frame", "leaf", T_parent_joint=T, axis=[0, 0, 1], limits=JointLimits(0.0, 1.5))
+    return ArticulatedModel("door", (Link("frame"), leaf), (hinge,))
