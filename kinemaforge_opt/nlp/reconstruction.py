@@ -48,7 +48,7 @@ from ..model import ArticulatedModel, JointDynamics, JointLimits
 from ..physics.effects import EFFECTS
 from ..symbolic import build_dynamics
 from .problem import Problem, Result
-from .visual import Correspondences, SurfaceModel, correspond, fixed_subsample, point_to_plane, pseudo_huber
+from .visual import Correspondences, SurfaceModel, correspond, fixed_subsample, pseudo_huber, robust_value, z_vector
 
 ENERGY_MODES = ("soft", "hard", "off")
 
@@ -74,7 +74,7 @@ class ScrewOptions:
     energy: str = "soft"
     coarse_to_fine: bool = True
     points_per_part: int = 200
-    rounds: int = 2
+    rounds: int = 6
     substep_s: float = 1.0 / 30.0
     dyn_sigma: float = 0.1
     energy_sigma: float = 0.05
@@ -84,6 +84,8 @@ class ScrewOptions:
     fit_dynamics: bool = True
     max_iter: int = 200
     jit: bool = False
+    hessian: str = "exact"
+    expand: bool = True
 
     def __post_init__(self):
         if self.energy not in ENERGY_MODES:
@@ -257,8 +259,11 @@ def transforms_world0_t(model: ArticulatedModel, link: str, q: np.ndarray) -> np
     return np.array([dyn.poses(qq)[i] @ inv0 for qq in q])
 
 
-def correspondences(data: ScrewData, state: ScrewState, size: int, seed: int = 0) -> dict[str, list[Correspondences]]:
-    """Per moving part and observed step, correspondences under the motion of ``state``."""
+def correspondences(data: ScrewData, state: ScrewState, size: int, seed: int = 0,
+                    delta: float | None = None) -> dict[str, list[Correspondences]]:
+    """Per moving part and observed step, correspondences under the motion of ``state``, with IRLS
+    weights for the pseudo-Huber width ``delta`` [m] (default ``data.delta``)."""
+    delta = data.delta if delta is None else delta
     model = state_model(data, state)
     cols = np.searchsorted(state.t, data.times)
     out = {}
@@ -268,9 +273,20 @@ def correspondences(data: ScrewData, state: ScrewState, size: int, seed: int = 0
         for s, pts in enumerate(obs):
             pts = np.zeros((0, 3)) if pts is None else pts
             pts = pts[fixed_subsample(pts, size, seed + 1000 * p + s)]
-            items.append(correspond(pts, Ts[s], data.surfaces[link], data.gate, size))
+            items.append(correspond(pts, Ts[s], data.surfaces[link], data.gate, size, delta))
         out[link] = items
     return out
+
+
+def vis_value(data: ScrewData, state: ScrewState, corr: dict[str, list[Correspondences]]) -> float:
+    """The robust visual term Σ ρ_δ(r)/δ² (not its IRLS surrogate) under the motion of ``state``."""
+    model = state_model(data, state)
+    cols = np.searchsorted(state.t, data.times)
+    total = 0.0
+    for link, items in corr.items():
+        Ts = transforms_world0_t(model, link, state.q[cols])
+        total += sum(robust_value(c, T, data.delta) for c, T in zip(items, Ts))
+    return float(total)
 
 
 def _ancestors(model: ArticulatedModel, link: str) -> list[int]:
@@ -430,17 +446,13 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         total = ca.MX(0)
         qs = ca.SX.sym("q", n)
         for link, items in corr.items():
-            N = items[0].weights.size
-            Y, Xs, Nn, W = (ca.SX.sym(s, r, N) for s, r in (("y", 3), ("x", 3), ("n", 3), ("w", 1)))
+            Hs = ca.SX.sym("H", 13, 13)
             Tm = _transforms_world0_t(dyn, theta_sx, model.link_names.index(link), qs, ca.DM.zeros(n))
-            r = point_to_plane(Tm, Xs, Nn, Y)
-            step = ca.Function(f"vis_{link}", [qs, theta_sx, Y, Xs, Nn, W],
-                               [ca.dot(W.T, pseudo_huber(r, data.delta)) / data.delta**2], jit)
+            zv = z_vector(Tm)
+            step = ca.Function(f"vis_{link}", [qs, theta_sx, Hs],
+                               [0.5 * ca.mtimes([zv.T, Hs, zv]) / data.delta**2], jit)
             mapped = step.map(len(items))
-            stack = lambda name: np.hstack([getattr(c, name) for c in items])  # noqa: E731
-            Qf = Q[:, frame_cols.tolist()]
-            vals = mapped(Qf, theta_mx, stack("observed"), stack("targets"), stack("normals"),
-                          np.concatenate([c.weights for c in items])[None, :])
+            vals = mapped(Q[:, frame_cols.tolist()], theta_mx, np.hstack([c.H for c in items]))
             total = total + ca.sum2(vals)
             n_vis += int(sum(c.weights.sum() for c in items))
         terms["vis"] = total
@@ -468,21 +480,21 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             q, v = x[:n], x[n:]
             return 0.5 * ca.dot(v, ca.mtimes(dyn.crba(q, theta_sx), v)) + dyn.potential_energy(q, theta_sx)
 
+        # the right-hand side once per grid point (mapped over G), the midpoint inside the interval
+        xs, h = ca.SX.sym("x", 2 * n), ca.SX.sym("h")
+        r_pt, w_pt = rhs(xs, ps, fs, ss)
+        point = ca.Function("rhs", [xs, ps, fs, ss, theta_sx, phi], [r_pt, w_pt], jit)
         xk, xk1 = ca.SX.sym("xk", 2 * n), ca.SX.sym("xk1", 2 * n)
-        pk, fk, sk = ca.SX.sym("pk", 3), ca.SX.sym("fk", 3), ca.SX.sym("sk", ss.numel())
-        pm, fm, sm = ca.SX.sym("pm", 3), ca.SX.sym("fm", 3), ca.SX.sym("sm", ss.numel())
-        pk1, fk1, sk1 = ca.SX.sym("pk1", 3), ca.SX.sym("fk1", 3), ca.SX.sym("sk1", ss.numel())
-        h = ca.SX.sym("h")
-        rk, wk = rhs(xk, pk, fk, sk)
-        rk1, wk1 = rhs(xk1, pk1, fk1, sk1)
+        rk, rk1 = ca.SX.sym("rk", 2 * n), ca.SX.sym("rk1", 2 * n)
+        wk, wk1 = ca.SX.sym("wk"), ca.SX.sym("wk1")
         xm = (xk + xk1) / 2 + h / 8 * (rk - rk1)
-        rm, wm = rhs(xm, pm, fm, sm)
+        rm, wm = rhs(xm, ps, fs, ss)
         defect = xk1 - xk - h / 6 * (rk + 4 * rm + rk1)
         scale = ca.DM(np.concatenate([v_s, a_s]))
         dnorm = defect / (h * scale) / options.dyn_sigma
-        interval = ca.Function("hermite_simpson", [xk, xk1, pk, fk, sk, pm, fm, sm, pk1, fk1, sk1, h, theta_sx, phi],
-                               [ca.sum1(pseudo_huber(dnorm, 1.0)), h / 6 * (wk + 4 * wm + wk1), energy_of(xk1) - energy_of(xk)], jit)
-        mapped = interval.map(G - 1)
+        interval = ca.Function("hermite_simpson", [xk, xk1, rk, rk1, wk, wk1, ps, fs, ss, h, theta_sx, phi],
+                               [ca.sum1(pseudo_huber(dnorm, 1.0)), h / 6 * (wk + 4 * wm + wk1)], jit)
+        energy = ca.Function("energy", [xs, theta_sx], [energy_of(xs)], jit)
         t_mid = (t_grid[:-1] + t_grid[1:]) / 2
         P, F, S = _wrench_at(data, t_grid, pushed or [""])
         Pm, Fm, Sm = _wrench_at(data, t_mid, pushed or [""])
@@ -497,13 +509,15 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
                 else:
                     phi_parts.append(ca.MX(values[k]))
         phi_mx = ca.vertcat(*phi_parts)
-        Dsum, Wk, dE = mapped(X[:, :-1], X[:, 1:], P[:, :-1], F[:, :-1], S[:, :-1], Pm, Fm, Sm,
-                              P[:, 1:], F[:, 1:], S[:, 1:], np.diff(t_grid)[None, :], theta_mx, phi_mx)
+        Rg, Wg = point.map(G)(X, P, F, S, theta_mx, phi_mx)
+        Dsum, Wk = interval.map(G - 1)(X[:, :-1], X[:, 1:], Rg[:, :-1], Rg[:, 1:], Wg[:, :-1], Wg[:, 1:],
+                                       Pm, Fm, Sm, np.diff(t_grid)[None, :], theta_mx, phi_mx)
         terms["dyn"] = ca.sum2(Dsum)
         if use_energy:
             steps = max(1, int(round(options.energy_window_s / max(np.median(np.diff(t_grid)), 1e-9))))
             edges = list(range(0, G - 1, steps)) + [G - 1]
-            resid = ca.vertcat(*[ca.sum2(dE[:, a:b]) - ca.sum2(Wk[:, a:b]) for a, b in zip(edges[:-1], edges[1:])])
+            E = energy.map(len(edges))(X[:, edges], theta_mx)  # ΔE telescopes: only window edges
+            resid = ca.vertcat(*[E[i + 1] - E[i] - ca.sum2(Wk[:, a:b]) for i, (a, b) in enumerate(zip(edges[:-1], edges[1:]))])
             e_scale = _energy_scale(model, dyn, q0, v0)
             rel = resid / e_scale
             if options.energy == "soft":
@@ -539,6 +553,18 @@ def _energy_scale(model: ArticulatedModel, dyn, q: np.ndarray, v: np.ndarray) ->
     """Spread of the mechanical energy along the initial trajectory [J] (≥ 1e-9)."""
     E = [0.5 * vv @ dyn.crba(qq, dyn.theta0).full() @ vv + float(dyn.potential_energy(qq, dyn.theta0)) for qq, vv in zip(q, v)]
     return float(max(np.ptp(E), 1e-9))
+
+
+def _solver_options(options: ScrewOptions, dense: bool) -> dict:
+    """IPOPT options.  With the dynamics, the mapped MX graph is expanded to SX unless JIT is on:
+    the exact Hessian of the mapped ABA intervals evaluated through MX cost ~1 s per iteration
+    on the test door, the expanded one a few ms (building it costs ~1 s once)."""
+    out = {"ipopt.acceptable_tol": 1e-5}
+    if options.hessian == "lbfgs":
+        out["ipopt.hessian_approximation"] = "limited-memory"
+    if dense and options.expand and not options.jit:
+        out["expand"] = True
+    return out
 
 
 def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
@@ -599,18 +625,26 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         nonlocal state
         t0 = time.perf_counter()
         sp = build_screw_problem(data, opts, state, corr, dense)
-        res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options={"ipopt.acceptable_tol": 1e-5})
+        res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn))
         improved = res.success or np.isfinite(res.objective)
         if improved:
             state = read_solution(sp, res)
         stages.append({"stage": name, "iterations": res.iterations, "success": res.success, "status": res.status,
-                       "time_s": time.perf_counter() - t0, "costs": res.costs, "n_vis": sp.n_vis,
+                       "time_s": time.perf_counter() - t0, "solve_s": res.solve_time_s,
+                       "eval_s": {k: round(float(v), 3) for k, v in res.stats.items() if k.startswith("t_wall_nlp")},
+                       "costs": res.costs, "violations": res.violations, "n_vis": sp.n_vis,
                        "variables": sp.problem.sizes["variables"]})
         return sp, res
 
     if options.coarse_to_fine and options.vis:
         for r in range(options.rounds):
-            run(f"vis_warmup_{r + 1}", correspondences(data, state, size), dense=False)
+            # the robust width is annealed from half the gate down to delta: far pairs keep their
+            # pull while the alignment is coarse, and lose it once it is fine
+            delta = max(data.delta, data.gate / 2 ** (r + 1))
+            before = (state.axes.copy(), state.origins.copy(), state.q.copy())
+            run(f"vis_warmup_{r + 1}", correspondences(data, state, size, delta=delta), dense=False)
+            if delta == data.delta and _converged(before, state):
+                break
         corr = correspondences(data, state, size)
     else:
         corr = correspondences(data, state, size) if options.vis else None
@@ -621,6 +655,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     for name, value in res.costs.items():
         key = "energy" if name == "energy_residual" else name
         terms[key] = float(value) * (max(sp.n_vis, 1) if name != "energy_residual" else 1.0)
+    if corr:
+        terms["vis"] = vis_value(data, state, corr)
     identified = tuple(n.split(":", 1)[0] + ":" + n.split(":", 1)[1] for n in res.values
                        if n.startswith(("damping:", "coulomb:", "inertia_ratio:")))
     if not sp.use_dyn:
@@ -628,6 +664,14 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     return ScrewResult(model, state.q[cols], state, terms, int(sum(s["iterations"] for s in stages)),
                        all(s["success"] for s in stages), tuple(stages), time.perf_counter() - start,
                        identified, tuple(notes))
+
+
+def _converged(before, state: ScrewState, angle: float = 1e-4, distance: float = 1e-5) -> bool:
+    """True when a warm-up round moved no axis by more than ``angle`` [rad], no origin by more
+    than ``distance`` [m] and no q by more than ``angle`` (correspondences have settled)."""
+    axes, origins, q = before
+    return bool(np.all(np.abs(axes - state.axes) < angle) and np.all(np.abs(origins - state.origins) < distance)
+                and np.all(np.abs(q - state.q) < angle))
 
 
 def _without_fitted_dynamics(model: ArticulatedModel, original: ArticulatedModel) -> ArticulatedModel:

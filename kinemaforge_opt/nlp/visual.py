@@ -13,7 +13,14 @@ corresponding to the surface point x with normal n gives the point-to-plane resi
     r = (R n) · (R x + p − y) = n · (x + Rᵀ (p − y)),        T_world0_t = [R p; 0 1],
 
 and the term is Σ ρ_δ(r) with ρ_δ the pseudo-Huber loss δ² (√(1 + (r/δ)²) − 1) (quadratic below δ,
-linear above, smooth everywhere so IPOPT's Newton steps stay well defined).
+linear above, smooth everywhere).
+
+Inside one solve the robust loss is replaced by its iteratively-reweighted quadratic (IRLS):
+weights w = ρ'(r)/r = 1/√(1 + (r/δ)²) taken at the motion the correspondences were found under,
+so Σ w r²/2.  The residual is linear in z = [vec(Rᵀ); Rᵀp; 1] (13,): r = aᵀz with
+a = [−vec(n yᵀ); n; n·x], hence Σ w r² = zᵀ H z with the (13, 13) moment matrix H = Σ w a aᵀ,
+precomputed per part and time step — the NLP's cost per step no longer grows with the number
+of points.  Refreshing correspondences between coarse-to-fine stages refreshes the weights.
 
 Correspondences (which surface point each observed point is compared with) are found by a
 nearest-neighbour search in the zero configuration and held fixed during one solve; the
@@ -86,12 +93,32 @@ def point_to_plane(T_world0_t, x0, n0, y):
 @dataclass(frozen=True, eq=False)
 class Correspondences:
     """For one part and one time step: observed points (3, N) [m], their surface points and
-    normals (3, N) at the zero configuration, and weights (N,) (0 = rejected or padding)."""
+    normals (3, N) at the zero configuration, gate weights (N,) (0 = rejected or padding), IRLS
+    weights (N,) and the moment matrix H (13, 13) of the gated, IRLS-weighted pairs."""
 
     observed: np.ndarray
     targets: np.ndarray
     normals: np.ndarray
     weights: np.ndarray
+    irls: np.ndarray
+    H: np.ndarray
+
+
+def linear_rows(observed: np.ndarray, targets: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(N, 13) rows a with r = a·z, z = [vec(Rᵀ) (column-major); Rᵀp; 1] (see module doc)."""
+    y, x, n = observed.T, targets.T, normals.T
+    # n·Rᵀ y = Σ_jk n_j (Rᵀ)_jk y_k ; vec column-major: index j + 3k
+    outer = (n[:, :, None] * y[:, None, :]).reshape(len(y), 9, order="F")
+    return np.hstack([-outer, n, np.sum(n * x, axis=1, keepdims=True)])
+
+
+def z_vector(T_world0_t):
+    """z = [vec(Rᵀ); Rᵀp; 1] (13,) of a (4, 4) motion (numpy or casadi)."""
+    R, p = T_world0_t[:3, :3], T_world0_t[:3, 3]
+    if isinstance(T_world0_t, (ca.SX, ca.MX)):
+        return ca.vertcat(ca.vec(R.T), ca.mtimes(R.T, p), 1)
+    R, p = np.asarray(R), np.asarray(p)
+    return np.concatenate([R.T.reshape(-1, order="F"), R.T @ p, [1.0]])
 
 
 def fixed_subsample(points: np.ndarray, n: int, seed: int) -> np.ndarray:
@@ -102,10 +129,11 @@ def fixed_subsample(points: np.ndarray, n: int, seed: int) -> np.ndarray:
 
 
 def correspond(observed_world: np.ndarray, T_world0_t: np.ndarray, surface: SurfaceModel, gate: float,
-               size: int) -> Correspondences:
+               size: int, delta: float) -> Correspondences:
     """Nearest surface point of each observed point (M, 3) moved back to the zero configuration by
     ``T_world0_t``⁻¹ (4, 4); pairs farther than ``gate`` [m] get weight 0.  Padded with zero
-    weights to ``size`` columns (a fixed size lets one casadi Function be mapped over steps)."""
+    weights to ``size`` columns.  IRLS weights of the pseudo-Huber loss of width ``delta`` [m]
+    at ``T_world0_t``."""
     m = len(observed_world)
     if m > size:
         raise ValueError(f"{m} observed points exceed the block size {size}")
@@ -120,8 +148,15 @@ def correspond(observed_world: np.ndarray, T_world0_t: np.ndarray, surface: Surf
     tgt[:, :m] = surface.points[idx].T
     nrm[:, :m] = surface.normals[idx].T
     w[:m] = (d <= gate).astype(float)
-    # padding: copies of a valid pair with zero weight keep the residual finite
-    if m < size:
-        obs[:, m:] = tgt[:, m:] = 0.0
+    if m < size:  # padding: unit normals keep the residual finite
         nrm[0, m:] = 1.0
-    return Correspondences(obs, tgt, nrm, w)
+    A = linear_rows(obs, tgt, nrm)
+    r = A @ z_vector(T_world0_t)
+    irls = w / np.sqrt(1.0 + (r / delta) ** 2)
+    return Correspondences(obs, tgt, nrm, w, irls, (A * irls[:, None]).T @ A)
+
+
+def robust_value(c: Correspondences, T_world0_t: np.ndarray, delta: float) -> float:
+    """Σ gate-weight · ρ_δ(r) / δ² of one correspondence block under the motion ``T_world0_t``."""
+    r = point_to_plane(T_world0_t, c.targets, c.normals, c.observed)
+    return float(np.sum(c.weights * pseudo_huber(r, delta)) / delta**2)

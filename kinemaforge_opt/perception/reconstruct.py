@@ -9,6 +9,7 @@ placed on the joint line (the fitted origin), oriented like its parent link.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from dataclasses import dataclass
@@ -25,6 +26,8 @@ from ..io.atomic import atomic_path, write_text_atomic
 from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks
 from ..model import ArticulatedModel, Geometry, Inertial, Joint, JointLimits, Link, write_urdf
+from ..nlp.reconstruction import ScrewData, ScrewOptions, ScrewResult, refine_screws
+from ..nlp.visual import surface_model
 from ..spatial import inverse, make_transform
 from .change import STATIC
 from .perceive import Perception, perceive
@@ -98,10 +101,52 @@ def _representative(members: tuple[str, ...], tracks: PoseTracks) -> int:
     return max((tracks.names.index(m) for m in members), key=lambda k: obs[k])
 
 
-def build_model(per: Perception, graph: GraphResult, density: float, name: str = "reconstruction"):
-    """Kinematic tree + fused points -> (ArticulatedModel, joint records, part clouds at zero,
-    meshes, point labels).  Joint records follow the reconstruction.json contract."""
+@dataclass(frozen=True, eq=False)
+class JointLine:
+    """One joint of the tree as a line in the world at the zero configuration.  type: URDF joint
+    type.  axis_world (3,) unit, origin_world (3,) [m] (for prismatic/fixed joints the child's
+    position), pitch [m/rad].  q: (T,) joint value per time step of the perception [rad or m],
+    0 at the zero step, NaN where unknown."""
+
+    type: str
+    axis_world: np.ndarray
+    origin_world: np.ndarray
+    pitch: float
+    q: np.ndarray
+
+
+def closed_form_lines(per: Perception, graph: GraphResult) -> dict[str, JointLine]:
+    """The graph's closed-form joints as :class:`JointLine` s (zero configuration = first step at
+    which every moving part is seen)."""
     tracks, tree = per.tracks, graph.best
+    reps = {p: _representative(m, tracks) for p, m in tree.parts.items() if p != tree.root}
+    s0 = _zero_step(tracks, list(reps.values()))
+    T_world_track0 = {p: tracks.Ts_world_track(k)[s0] for p, k in reps.items()}
+    T_world_track0[tree.root] = np.eye(4)
+    lines = {}
+    for j in tree.joints:
+        h = j.hypothesis
+        jtype = "fixed" if h.type == "rigid" else h.type
+        T_wp = T_world_track0[j.parent]
+        axis = T_wp[:3, :3] @ h.axis_parent if h.axis_parent is not None else np.array([1.0, 0.0, 0.0])
+        origin = (T_wp[:3, :3] @ h.origin_parent + T_wp[:3, 3]) if h.origin_parent is not None else T_world_track0[j.child][:3, 3]
+        # q from the graph is 0 at the pair's first common sample; shift it to the zero step
+        common = tracks.observed()[reps[j.child]] & (
+            tracks.observed()[reps[j.parent]] if j.parent in reps else True)
+        q_times = tracks.times[common]
+        q = np.full(tracks.times.size, np.nan)
+        q[common] = np.asarray(h.q, dtype=float) - np.interp(tracks.times[s0], q_times, h.q)
+        lines[j.name] = JointLine(jtype, axis, origin, float(h.pitch) if jtype == "helical" else 0.0, q)
+    return lines
+
+
+def build_model(per: Perception, graph: GraphResult, density: float, name: str = "reconstruction",
+                lines: dict[str, JointLine] | None = None):
+    """Kinematic tree + fused points -> (ArticulatedModel, joint records, part clouds at zero,
+    meshes, point labels).  Joint records follow the reconstruction.json contract.  ``lines``:
+    the joints as world lines (default: :func:`closed_form_lines`, the graph's closed form)."""
+    tracks, tree = per.tracks, graph.best
+    lines = closed_form_lines(per, graph) if lines is None else lines
     part_of = {m: p for p, members in tree.parts.items() for m in members if m in tracks.names}
     reps = {p: _representative(m, tracks) for p, m in tree.parts.items() if p != tree.root}
     s0 = _zero_step(tracks, list(reps.values()))
@@ -110,26 +155,20 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
     T_world_track0[tree.root] = np.eye(4)
     joints, records = [], []
     for j in tree.joints:
-        h = j.hypothesis
-        jtype = "fixed" if h.type == "rigid" else h.type
-        T_wp = T_world_track0[j.parent]
-        axis = T_wp[:3, :3] @ h.axis_parent if h.axis_parent is not None else np.array([1.0, 0.0, 0.0])
-        origin = (T_wp[:3, :3] @ h.origin_parent + T_wp[:3, 3]) if h.origin_parent is not None else T_world_track0[j.child][:3, 3]
+        h, line = j.hypothesis, lines[j.name]
+        jtype, axis, origin = line.type, line.axis_world, line.origin_world
         T_world_joint = make_transform(T_world_link0[j.parent][:3, :3], origin)
         T_world_link0[j.child] = T_world_joint
         T_parent_joint = inverse(T_world_link0[j.parent]) @ T_world_joint
         axis_joint = T_world_joint[:3, :3].T @ axis
-        # q from the graph is 0 at the pair's first common sample; shift it to the zero step
-        common = tracks.observed()[reps[j.child]] & (
-            tracks.observed()[reps[j.parent]] if j.parent in reps else True)
-        q_times = tracks.times[common]
-        q = np.asarray(h.q, dtype=float) - np.interp(tracks.times[s0], q_times, h.q)
+        q = line.q[np.isfinite(line.q)]
         limits = JointLimits(float(q.min()), float(q.max())) if jtype != "fixed" else None
         joints.append(Joint(j.name, jtype, j.parent, j.child, T_parent_joint, axis_joint,
-                            h.pitch if jtype == "helical" else 0.0, limits))
+                            line.pitch if jtype == "helical" else 0.0, limits))
         records.append({
             "name": j.name, "type": jtype, "parent": j.parent, "child": j.child,
-            "axis_world": axis.tolist(), "origin_world": origin.tolist(), "pitch": float(h.pitch),
+            "axis_world": np.asarray(axis, float).tolist(), "origin_world": np.asarray(origin, float).tolist(),
+            "pitch": float(line.pitch),
             "limits": None if limits is None else [limits.lower, limits.upper],
             "confidence": float(h.confidence), "residual_rms_m": float(h.residual_rms),
             **({"radius": float(h.radius)} if h.radius is not None else {}),
@@ -161,14 +200,138 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
     return model, records, clouds_world, meshes, labels
 
 
+def _filled(q: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """q (T,) with NaNs filled by linear interpolation in time (held constant at the ends)."""
+    ok = np.isfinite(q)
+    return np.interp(times, times[ok], q[ok]) if ok.any() else np.zeros_like(q)
+
+
+def pushed_links(per: Perception, labels: list[np.ndarray], wrenches, links: list[str]) -> np.ndarray:
+    """Per wrench sample, the moving link the force acts on: the part (among ``links`` and the base)
+    with an observed point nearest to the application point at the nearest time step; "" while
+    the force is zero or when the base is nearest (a push on the base moves no joint)."""
+    out = np.full(wrenches.t.size, "", dtype=object)
+    trees = {}
+    for i, (t, p, f) in enumerate(zip(wrenches.t, wrenches.points_world, wrenches.forces_world)):
+        if not np.any(f):
+            continue
+        s = int(np.argmin(np.abs(per.times - t)))
+        best, best_d = "", np.inf
+        for link in links + [BASE]:
+            key = (link, s)
+            if key not in trees:
+                pts = per.clouds[s].points[labels[s] == link]
+                trees[key] = cKDTree(pts) if len(pts) else None
+            if trees[key] is not None:
+                d = trees[key].query(p)[0]
+                if d < best_d:
+                    best, best_d = link, d
+        out[i] = "" if best == BASE else best
+    return out
+
+
+def screw_data(per: Perception, seq, model: ArticulatedModel, lines: dict[str, JointLine],
+               clouds_world: dict[str, np.ndarray], labels: list[np.ndarray]) -> ScrewData:
+    """The NLP's inputs from the perception and the closed-form model (see :class:`ScrewData`):
+    observed points per moving part and step, surface models at the zero configuration (fused
+    points, normals from local planes), the Huber width = the voxel edge (the spacing of the
+    fused points, which bounds the point-to-plane misfit of a sampled surface) and the gate = two
+    ICP inlier distances."""
+    moving = [j.child for j in model.movable_joints]
+    observed = {p: [c.points[lab == p] for c, lab in zip(per.clouds, labels)] for p in moving}
+    surfaces = {p: surface_model(clouds_world[p], per.voxel, p) for p in moving}
+    q0 = np.column_stack([_filled(lines[j.name].q, per.times) for j in model.movable_joints]) if moving else np.zeros((per.times.size, 0))
+    w = seq.wrenches
+    pushed = pushed_links(per, labels, w, moving) if w is not None else None
+    if w is not None and not any(pushed):
+        w, pushed = None, None
+    return ScrewData(model, per.times, q0, observed, surfaces, delta=per.voxel, gate=2 * per.inlier_distance,
+                     wrenches=w, pushed_link=pushed)
+
+
+def refined_lines(result: ScrewResult, per: Perception, lines: dict[str, JointLine]) -> dict[str, JointLine]:
+    """The NLP's joints as world lines at the zero configuration (fixed joints unchanged)."""
+    from ..symbolic import build_dynamics
+
+    m = result.model
+    poses = build_dynamics(m).poses(np.zeros(m.nq))
+    out = dict(lines)
+    for k, j in enumerate(m.movable_joints):
+        T = poses[m.link_names.index(j.child)]
+        out[j.name] = JointLine(j.type, T[:3, :3] @ j.axis, T[:3, 3].copy(), float(j.pitch), result.q[:, k].copy())
+    return out
+
+
+def _apply_identified(model: ArticulatedModel, records: list[dict], result: ScrewResult) -> ArticulatedModel:
+    """Damping / Coulomb friction and inertia ratios identified by the NLP into the rebuilt model
+    and the joint records (``dynamics``)."""
+    fitted = set(result.identified)
+    for j in result.model.movable_joints:
+        if f"damping:{j.name}" in fitted:
+            d = j.dynamics
+            model = model.with_joint(j.name, dynamics=dataclasses.replace(model.joint(j.name).dynamics,
+                                                                         damping=d.damping, coulomb=d.coulomb))
+            rec = next(r for r in records if r["name"] == j.name)
+            rec["dynamics"] = {"damping": d.damping, "coulomb": d.coulomb}
+    for link, r in result.state.inertia_ratio.items():
+        inert = model.link(link).inertial
+        model = model.with_link(link, inertial=dataclasses.replace(inert, mass=inert.mass * r, inertia=inert.inertia * r))
+    return model
+
+
+def _line_record(name: str, line: JointLine) -> dict:
+    return {"name": name, "type": line.type, "axis_world": np.asarray(line.axis_world, float).tolist(),
+            "origin_world": np.asarray(line.origin_world, float).tolist(), "pitch": float(line.pitch)}
+
+
+def refine_model(per: Perception, graph: GraphResult, seq, density: float, options: ScrewOptions | None,
+                 name: str = "reconstruction"):
+    """Closed-form model, then (unless ``options`` is None) the screw-axis NLP and the model rebuilt
+    on its joints.  Returns build_model's tuple plus the ``nlp`` document (None without NLP)."""
+    lines = closed_form_lines(per, graph)
+    model, records, clouds_world, meshes, labels = build_model(per, graph, density, name, lines)
+    if options is None or not model.movable_joints:
+        return model, records, clouds_world, meshes, labels, None
+    t0 = time.perf_counter()
+    data = screw_data(per, seq, model, lines, clouds_world, labels)
+    result = refine_screws(data, options)
+    new_lines = refined_lines(result, per, lines)
+    model, records, clouds_world, meshes, labels = build_model(per, graph, density, name, new_lines)
+    model = _apply_identified(model, records, result)
+    doc = {
+        "enabled": True, "terms": result.terms, "iterations": result.iterations, "success": result.success,
+        "time_s": time.perf_counter() - t0, "identified": list(result.identified), "notes": list(result.notes),
+        "stages": [{k: v for k, v in st.items() if k in ("stage", "iterations", "success", "status", "time_s", "costs")}
+                   for st in result.stages],
+        "options": dataclasses.asdict(options),
+        "closed_form": [_line_record(n, lines[n]) for n in lines],
+        "inertia_ratio": result.state.inertia_ratio,
+    }
+    return model, records, clouds_world, meshes, labels, doc
+
+
 def reconstruct_sequence(seq_path: str | Path, out: str | Path | None = None, method: str = "graph",
-                         k_best: int = 3, density: float = DEFAULT_DENSITY, show_progress: bool | None = None) -> Reconstruction:
+                         k_best: int = 3, density: float = DEFAULT_DENSITY, show_progress: bool | None = None,
+                         nlp: bool = True, coarse_to_fine: bool = True, energy: str | bool = "soft",
+                         energy_weight: float = 1.0, nlp_options: ScrewOptions | None = None) -> Reconstruction:
     """RGB-D sequence folder -> :class:`Reconstruction`; with ``out``, also writes
     OUT/reconstruction.json, OUT/model.urdf, OUT/meshes/<link>.obj and OUT/clouds.npz.
-    ``show_progress``: tqdm bar on stderr (None = only on a terminal)."""
+    ``show_progress``: tqdm bar on stderr (None = only on a terminal).
+
+    Ablation switches (the seed's Table 2): ``method="greedy"`` (without the graph), ``nlp=False``
+    (closed-form joints only), ``coarse_to_fine=False`` (one NLP solve from the closed form),
+    ``energy`` "soft" | "hard" | "off" (True = "soft", False = "off"), ``energy_weight`` (soft
+    penalty weight).  ``nlp_options`` sets every NLP option at once (then the three NLP keywords
+    above are applied on top of it)."""
     start = time.perf_counter()
+    if isinstance(energy, bool):
+        energy = "soft" if energy else "off"
+    options = None
+    if nlp:
+        options = dataclasses.replace(nlp_options or ScrewOptions(), coarse_to_fine=coarse_to_fine, energy=energy,
+                                      energy_weight=energy_weight)
     seq = load_sequence(seq_path)
-    with tqdm(total=5, desc="load", disable=None if show_progress is None else not show_progress,
+    with tqdm(total=6, desc="load", disable=None if show_progress is None else not show_progress,
               unit="stage") as bar:
         per = perceive(seq, bar)
         t0 = time.perf_counter()
@@ -177,10 +340,12 @@ def reconstruct_sequence(seq_path: str | Path, out: str | Path | None = None, me
         bar.update(1)
         bar.set_description("graph")
         t0 = time.perf_counter()
-        model, records, clouds_world, meshes, labels = build_model(per, graph, density)
-        per.timing_s["model"] = time.perf_counter() - t0
+        model, records, clouds_world, meshes, labels, nlp_doc = refine_model(per, graph, seq, density, options)
+        elapsed = time.perf_counter() - t0
+        per.timing_s["nlp"] = nlp_doc["time_s"] if nlp_doc else 0.0
+        per.timing_s["model"] = elapsed - per.timing_s["nlp"]
         bar.update(1)
-        bar.set_description("model")
+        bar.set_description("model + nlp")
     doc = {
         "joints": records,
         "links": [{"name": l.name, "mass": l.inertial.mass, "density": density,
@@ -188,6 +353,7 @@ def reconstruct_sequence(seq_path: str | Path, out: str | Path | None = None, me
         "alternatives": [{"log_score": t.log_score, "joints": [[j.parent, j.child, j.type] for j in t.joints]}
                          for t in graph.alternatives],
         "method": method,
+        "nlp": nlp_doc if nlp_doc is not None else {"enabled": False},
         "perception": {"depth_noise_k_per_m": per.noise.k, "voxel_m": per.voxel,
                        "proposals": len(per.proposals), "environment_planes": len(per.environment)},
         "timing_s": {**per.timing_s, "total": time.perf_counter() - start},

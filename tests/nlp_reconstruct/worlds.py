@@ -16,7 +16,7 @@ from kinemaforge_opt.nlp.reconstruction import ScrewData
 from kinemaforge_opt.nlp.visual import SurfaceModel
 from kinemaforge_opt.spatial import exp_so3, make_transform, normalize
 
-BOX = np.array([0.4, 0.02, 0.6])  # door slab size [m]
+BOX = np.array([0.4, 0.04, 0.6])  # door slab size [m]
 
 
 def box_surface(size: np.ndarray, center: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
@@ -70,7 +70,7 @@ def moved(model: ArticulatedModel, q: float, pts: np.ndarray, nrm: np.ndarray | 
 
 
 def exact_data(true: ArticulatedModel, init: ArticulatedModel, times: np.ndarray, q_true: np.ndarray,
-               q_init: np.ndarray, spacing: float = 0.02, wrenches: Wrenches | None = None, rng=None) -> ScrewData:
+               q_init: np.ndarray, spacing: float = 0.01, wrenches: Wrenches | None = None, rng=None) -> ScrewData:
     """ScrewData with the exact surface of ``true`` and exact observed points (a random subset
     of a finer surface sampling, different at each step) of it moved to ``q_true``."""
     rng = rng or np.random.default_rng(0)

@@ -1,0 +1,162 @@
+"""The screw-axis NLP on exact synthetic data: a box door on a known joint, its exact surface, exact
+observed points (different points at every step), and for the dynamics a trajectory integrated
+independently with scipy + pinocchio's numeric ABA under a known push."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from kinemaforge_opt.errors import KinemaforgeError
+from kinemaforge_opt.nlp.reconstruction import (
+    ScrewOptions,
+    build_screw_problem,
+    correspondences,
+    initial_state,
+    refine_screws,
+    state_model,
+    transforms_world0_t,
+)
+from kinemaforge_opt.nlp.visual import linear_rows, point_to_plane, z_vector
+from kinemaforge_opt.spatial import axis_angle_error, exp_so3, line_distance, make_transform, normalize
+
+from .worlds import door_model, exact_data, pushed_trajectory
+
+AXIS = normalize([0.05, -0.03, 1.0])
+ORIGIN = np.array([0.3, 0.2, 0.1])
+TILT = exp_so3(normalize([1.0, 1.0, 0.0]) * np.radians(3.0))  # 3° error of the closed form
+
+
+def _errors(model, axis=AXIS, origin=ORIGIN):
+    j = model.joint("hinge")
+    return np.degrees(axis_angle_error(j.axis, axis)), line_distance(j.axis, j.T_parent_joint[:3, 3], axis, origin)
+
+
+@pytest.fixture(scope="module")
+def pushed():
+    """A damped door (b = 0.5 N·m·s/rad, 3 kg) pushed 1 N at its edge for 0.5 s, 1.5 s, frames at 10 Hz."""
+    true = door_model(AXIS, ORIGIN, damping=0.5)
+    init = door_model(TILT @ AXIS, ORIGIN + [0.01, -0.008, 0.0])
+    t, q, _, w = pushed_trajectory(true, 1.5, 120, 0.5, 1.0)
+    idx = np.arange(0, t.size, 12)
+    rng = np.random.default_rng(1)
+    data = exact_data(true, init, t[idx], q[idx], q[idx] + rng.normal(0, 0.02, idx.size), wrenches=w)
+    return true, data, q[idx]
+
+
+def test_residual_linearisation_matches_the_direct_point_to_plane_residual():
+    rng = np.random.default_rng(3)
+    T = make_transform(exp_so3(rng.normal(size=3)), rng.normal(size=3))
+    x, n, y = rng.normal(size=(3, 50)), rng.normal(size=(3, 50)), rng.normal(size=(3, 50))
+    # independent: move the surface point and its normal, then project the gap onto the normal
+    direct = np.sum((T[:3, :3] @ n) * (T[:3, :3] @ x + T[:3, 3:4] - y), axis=0)
+    np.testing.assert_allclose(point_to_plane(T, x, n, y), direct, atol=1e-12)
+    np.testing.assert_allclose(linear_rows(y, x, n) @ z_vector(T), direct, atol=1e-12)
+
+
+def test_vis_recovers_the_exact_axis_from_a_3_degree_error():
+    true = door_model(AXIS, ORIGIN)
+    init = door_model(TILT @ AXIS, ORIGIN + [0.01, -0.008, 0.0])
+    times = np.linspace(0.0, 2.0, 8)
+    q = 0.9 * np.sin(0.7 * times)
+    data = exact_data(true, init, times, q, q + np.random.default_rng(1).normal(0, 0.03, q.size))
+    assert _errors(init)[0] > 2.9
+    r = refine_screws(data, ScrewOptions(dyn=False))
+    axis_deg, origin_m = _errors(r.model)
+    assert r.success
+    assert axis_deg < 0.1 and origin_m < 1e-3
+    np.testing.assert_allclose(r.q[:, 0], q, atol=2e-3)
+    assert r.terms["vis"] > 0 and r.terms["dyn"] is None and r.terms["energy"] is None
+
+
+def test_prismatic_joint_axis_is_recovered():
+    axis = normalize([1.0, 0.1, 0.05])
+    true = door_model(axis, ORIGIN, kind="prismatic")
+    init = door_model(TILT @ axis, ORIGIN, kind="prismatic")
+    times = np.linspace(0.0, 1.0, 6)
+    q = 0.3 * times
+    data = exact_data(true, init, times, q, q + 0.01)
+    r = refine_screws(data, ScrewOptions(dyn=False))
+    assert np.degrees(axis_angle_error(r.model.joint("hinge").axis, axis)) < 0.1
+    np.testing.assert_allclose(r.q[:, 0], q, atol=1e-3)
+
+
+def test_full_objective_recovers_axis_damping_and_mass_scale(pushed):
+    true, data, q = pushed
+    r = refine_screws(data, ScrewOptions(energy="soft"))
+    axis_deg, origin_m = _errors(r.model)
+    assert r.success
+    assert axis_deg < 0.1 and origin_m < 1e-3
+    j = r.model.joint("hinge")
+    assert j.dynamics.damping == pytest.approx(0.5, rel=0.05)
+    assert j.dynamics.coulomb < 0.02  # none in the truth
+    assert r.state.inertia_ratio["door"] == pytest.approx(1.0, rel=0.05)  # init inertia = true inertia
+    assert set(r.identified) == {"damping:hinge", "coulomb:hinge", "inertia_ratio:door"}
+    for term in ("vis", "dyn", "energy"):
+        assert r.terms[term] is not None and np.isfinite(r.terms[term])
+    assert [s["stage"] for s in r.stages][0] == "vis_warmup_1" and r.stages[-1]["stage"] == "full"
+
+
+def test_hard_energy_constraint_converges_and_holds(pushed):
+    true, data, q = pushed
+    opts = ScrewOptions(energy="hard", energy_tolerance=0.01)
+    r = refine_screws(data, opts)
+    assert r.success
+    assert _errors(r.model)[0] < 0.1
+    full = r.stages[-1]
+    assert full["violations"]["energy"] <= 1e-6  # |relative residual| <= tolerance in every window
+    n_windows = 2  # 1.5 s in 1-s windows
+    assert r.terms["energy"] is not None and r.terms["energy"] <= n_windows * 0.01**2 + 1e-9
+    sp = build_screw_problem(data, opts, r.state, correspondences(data, r.state, opts.points_per_part), dense=True)
+    assert "energy" in sp.problem.terms["constraints"] and "energy" not in sp.problem.terms["costs"]
+
+
+@pytest.mark.parametrize("switch, off", [(dict(vis=False), "vis"), (dict(dyn=False), "dyn"), (dict(energy="off"), "energy")])
+def test_each_term_can_be_switched_off(pushed, switch, off):
+    true, data, q = pushed
+    opts = dataclasses.replace(ScrewOptions(), **switch)
+    state = initial_state(data)
+    corr = correspondences(data, state, opts.points_per_part) if opts.vis else None
+    sp = build_screw_problem(data, opts, state, corr, dense=True)
+    costs = sp.problem.terms["costs"]
+    assert off not in costs
+    assert {"vis", "dyn", "energy"} - {off} <= set(costs) | ({"energy"} if off == "dyn" else set())
+    r = refine_screws(data, dataclasses.replace(opts, max_iter=30))
+    assert r.terms[off] is None
+    for other in {"vis", "dyn", "energy"} - {off} - ({"energy"} if off == "dyn" else set()):
+        assert r.terms[other] is not None
+
+
+def test_without_coarse_to_fine_is_one_solve(pushed):
+    true, data, q = pushed
+    r = refine_screws(data, ScrewOptions(coarse_to_fine=False, dyn=False))
+    assert [s["stage"] for s in r.stages] == ["full"]
+    assert _errors(r.model)[0] < _errors(data.model)[0]
+
+
+def test_motion_of_a_link_from_the_zero_configuration():
+    model = door_model(AXIS, ORIGIN)
+    T = transforms_world0_t(model, "door", np.array([[0.4]]))[0]
+    R = exp_so3(AXIS * 0.4)  # rotation about the line (ORIGIN, AXIS), independent of link frames
+    np.testing.assert_allclose(T[:3, :3], R, atol=1e-12)
+    np.testing.assert_allclose(T[:3, 3], ORIGIN - R @ ORIGIN, atol=1e-12)
+
+
+def test_options_are_checked_with_a_message():
+    with pytest.raises(KinemaforgeError, match="energy must be one of .*'soft'.*got 'strong'"):
+        ScrewOptions(energy="strong")
+    with pytest.raises(KinemaforgeError, match="at least one of the terms 'vis' and 'dyn'"):
+        ScrewOptions(vis=False, dyn=False)
+
+
+def test_vis_off_without_forces_has_nothing_to_fit():
+    true = door_model(AXIS, ORIGIN)
+    times = np.linspace(0.0, 1.0, 4)
+    data = exact_data(true, true, times, 0.2 * times, 0.2 * times)
+    with pytest.raises(KinemaforgeError, match="'vis' is off and 'dyn' has no recorded forces"):
+        refine_screws(data, ScrewOptions(vis=False))
+    r = refine_screws(data, ScrewOptions(dyn=True))  # dyn requested but no wrenches: noted, vis only
+    assert r.terms["dyn"] is None and any("no recorded forces" in n for n in r.notes)
+    assert state_model(data, r.state).joint("hinge").limits.upper == pytest.approx(0.2, abs=1e-3)
