@@ -53,6 +53,14 @@ def register(subparsers) -> None:
     p.add_argument("--k-best", type=int, default=3, help="trees to keep (best + alternatives), default 3")
     p.add_argument("--density", type=float, default=DEFAULT_DENSITY,
                    help=f"part density for masses from the meshes [kg/m³] (RGB-D input), default {DEFAULT_DENSITY:g}")
+    nlp = p.add_argument_group("joint-inference NLP (RGB-D input; ablation switches of the seed's Table 2)")
+    nlp.add_argument("--no-nlp", dest="nlp", action="store_false",
+                     help="keep the closed-form joints of the graph (no screw-axis NLP)")
+    nlp.add_argument("--no-coarse-to-fine", dest="coarse_to_fine", action="store_false",
+                     help="one NLP solve from the closed form (no vis warm-up with refreshed correspondences)")
+    nlp.add_argument("--energy", choices=("soft", "hard", "off"), default="soft",
+                     help="energy balance as a soft penalty (default), a hard constraint, or off")
+    nlp.add_argument("--energy-weight", type=float, default=1.0, help="weight of the soft energy penalty, default 1")
     p.set_defaults(func=run)
 
 
@@ -117,7 +125,9 @@ def run(args) -> int:
 def _run_sequence(args) -> int:
     from ..verify.reconstruction import verify_reconstruction
 
-    rec = reconstruct_sequence(args.input, args.out, method=args.method, k_best=args.k_best, density=args.density)
+    rec = reconstruct_sequence(args.input, args.out, method=args.method, k_best=args.k_best, density=args.density,
+                               nlp=args.nlp, coarse_to_fine=args.coarse_to_fine, energy=args.energy,
+                               energy_weight=args.energy_weight)
     for j in rec.document["joints"]:
         print(f"{j['name']}: {j['type']} {j['parent']} -> {j['child']} axis {[round(a, 3) for a in j['axis_world']]} "
               f"(ρ = {j['confidence']:.2f})")
