@@ -27,6 +27,10 @@ from .clouds import DepthNoise, TimeCloud
 # Two-sided test level: a 3σ band keeps 99.7 % of noise-only differences consistent.
 TEST_SIGMAS = 3.0
 STATIC, UNKNOWN, MOVING = 0, 1, 2
+# A moving reading needs at least this many moving readings in its 3×3 window (itself included).
+MIN_MOVING_NEIGHBOURS = 3
+# Free-space tests of moving cameras compare each time step with at most this many others.
+MAX_OTHER_STEPS = 10
 
 
 def window_stack(depth: np.ndarray) -> np.ndarray:
@@ -62,22 +66,84 @@ def free_space_test(points_world: np.ndarray, camera: CameraInfo, T_world_camera
     return out
 
 
-def motion_status(clouds: list[TimeCloud], cameras: dict[str, CameraInfo], noise: DepthNoise) -> list[np.ndarray]:
-    """Per time step, (M_t,) int8 status of its fused points: STATIC, UNKNOWN or MOVING (module doc)."""
-    ranges = [[window_stack(v.depth) for v in c.views] for c in clouds]
+def verdict_status(violated: np.ndarray, consistent: np.ndarray) -> np.ndarray:
+    """Status from per-point counts of violated and consistent tests (module doc)."""
+    s = np.full(violated.shape, UNKNOWN, dtype=np.int8)
+    s[(violated == 0) & (consistent > 0)] = STATIC
+    s[(violated >= 2) | ((violated == 1) & (consistent == 0))] = MOVING
+    return s
+
+
+def despeckle(status: np.ndarray) -> np.ndarray:
+    """(h, w) pixel status with isolated MOVING pixels (fewer than MIN_MOVING_NEIGHBOURS moving
+    pixels in their 3×3 window, themselves included) set to UNKNOWN: a single noisy reading in
+    front of the surface is violated by every other time, but a moving surface covers a patch."""
+    m = (status == MOVING).astype(np.int16)
+    pad = np.pad(m, 1)
+    h, w = m.shape
+    count = sum(pad[i : i + h, j : j + w] for i in range(3) for j in range(3))
+    out = status.copy()
+    out[(status == MOVING) & (count < MIN_MOVING_NEIGHBOURS)] = UNKNOWN
+    return out
+
+
+def pixel_status(depths: np.ndarray, noise: DepthNoise) -> np.ndarray:
+    """(T, h, w) int8 status of every reading of one *static* camera from its own (T, h, w)
+    depth images [m] (NaN = no reading): the free-space test of each reading against the same
+    pixel at every other time (no reprojection needed).  Pixels whose readings all agree within
+    τ at the nearest depth are static at once; only the others are compared pairwise."""
+    D = np.asarray(depths, dtype=np.float32)
+    T = D.shape[0]
+    out = np.full(D.shape, UNKNOWN, dtype=np.int8)
+    valid = np.isfinite(D)
+    n_valid = valid.sum(axis=0)
+    with np.errstate(invalid="ignore", all="ignore"):
+        lo = np.where(n_valid > 0, np.nanmin(np.where(valid, D, np.inf), axis=0), np.nan)
+        hi = np.nanmax(np.where(valid, D, -np.inf), axis=0)
+        tau_lo = TEST_SIGMAS * np.sqrt(2.0) * noise.sigma(lo)
+        calm = (n_valid >= 2) & (hi - lo <= tau_lo)
+    out[:, calm] = np.where(valid[:, calm], STATIC, UNKNOWN)
+    busy = np.flatnonzero(~calm.ravel() & (n_valid.ravel() >= 2))
+    if busy.size:
+        d = D.reshape(T, -1)[:, busy]  # (T, n)
+        tau = (TEST_SIGMAS * np.sqrt(2.0) * noise.sigma(d)).astype(np.float32)
+        viol = np.zeros(d.shape, dtype=np.int16)
+        cons = np.zeros(d.shape, dtype=np.int16)
+        with np.errstate(invalid="ignore"):
+            for j in range(T):
+                diff = d[j][None] - d
+                viol += diff > tau
+                cons += np.abs(diff) <= tau
+        cons -= np.isfinite(d)  # the reading itself
+        st = verdict_status(viol, cons)
+        st[~np.isfinite(d)] = UNKNOWN
+        flat = out.reshape(T, -1)
+        flat[:, busy] = st
+    for t in range(T):
+        out[t] = despeckle(out[t])
+    return out
+
+
+def motion_status(clouds: list[TimeCloud], cameras: dict[str, CameraInfo], noise: DepthNoise,
+                  points: list[np.ndarray] | None = None, max_other_steps: int = MAX_OTHER_STEPS) -> list[np.ndarray]:
+    """Per time step, (M_t,) int8 status of its points (``points``, default the fused points):
+    STATIC, UNKNOWN or MOVING from free-space tests against the views of up to
+    ``max_other_steps`` other time steps spread over the sequence (module doc).  Works for any
+    camera motion; :func:`pixel_status` is the fast path for static cameras."""
     status = []
+    n = len(clouds)
     for i, c in enumerate(clouds):
-        violated = np.zeros(len(c.points), dtype=int)
-        consistent = np.zeros(len(c.points), dtype=int)
-        for j, other in enumerate(clouds):
-            if j == i:
-                continue
-            for view, rng in zip(other.views, ranges[j]):
-                verdict = free_space_test(c.points, cameras[view.frame.camera], view.frame.T_world_camera, rng, noise)
+        pts = c.points if points is None else points[i]
+        others = [j for j in range(n) if j != i]
+        if len(others) > max_other_steps:
+            others = [others[k] for k in np.unique(np.round(np.linspace(0, len(others) - 1, max_other_steps)).astype(int))]
+        violated = np.zeros(len(pts), dtype=int)
+        consistent = np.zeros(len(pts), dtype=int)
+        for j in others:
+            for view in clouds[j].views:
+                cam = view.camera or cameras[view.frame.camera]
+                verdict = free_space_test(pts, cam, view.frame.T_world_camera, window_stack(view.depth), noise)
                 violated += verdict < 0
                 consistent += verdict > 0
-        s = np.full(len(c.points), UNKNOWN, dtype=np.int8)
-        s[(violated == 0) & (consistent > 0)] = STATIC
-        s[(violated >= 2) | ((violated == 1) & (consistent == 0))] = MOVING
-        status.append(s)
+        status.append(verdict_status(violated, consistent))
     return status

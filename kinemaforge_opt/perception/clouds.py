@@ -6,10 +6,19 @@ Noise model: a stereo depth sensor's z-noise grows as σ_z = k·z² (disparity n
 function of the pixel coordinates, so its second differences along image rows and columns are
 pure noise (variance 6 k²); their robust spread (MAD) over all images gives k from the data
 alone, without a sensor sheet.  Depth quantisation (1 / depth_scale) sets a floor.
+
+Resolution: every image is first decimated to a pixel *stride* so that one view contributes
+about one sample per voxel (the voxel edge is VOXEL_FOOTPRINTS full-resolution pixel
+footprints, so the stride is VOXEL_FOOTPRINTS pixels); inverse depth stays affine on planes in
+the decimated image, so the noise estimate and the edge test hold unchanged.  Points on moving
+or undecided surfaces are fused at the voxel edge; the static background, which only feeds the
+base link's mesh and the labels, is fused at a coarser voxel chosen so that one time step holds
+at most STATIC_POINT_BUDGET static points (a cost bound, independent of the scene).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +37,11 @@ OUTLIER_STD_RATIO = 3.0
 # Voxel edge = this many times the median pixel footprint on the surface: removes the
 # redundancy of overlapping views while keeping every surface a few voxels wide.
 VOXEL_FOOTPRINTS = 2.0
+# At most this many static points per fused time step (see module doc).
+STATIC_POINT_BUDGET = 20000
+# The noise estimate uses at most this many images (a few hundred thousand second differences
+# pin k down to well under 1 %).
+NOISE_IMAGES = 8
 
 
 @dataclass(frozen=True)
@@ -48,24 +62,38 @@ class DepthNoise:
 @dataclass(frozen=True, eq=False)
 class FrameCloud:
     """The kept pixels of one depth image.  frame: the source frame.  pixels: (N, 2) (row,
-    column) indices.  points_world: (N, 3) [m].  depth: (H, W) z-depth [m], NaN = no reading
-    (the raw image, kept for free-space tests)."""
+    column) indices in the full-resolution image.  points_world: (N, 3) [m].  depth: (h, w)
+    z-depth [m] of the decimated image, NaN = no reading (kept for free-space tests).
+    camera: the intrinsics of ``depth`` (the frame's camera decimated by ``stride``).
+    status: (N,) STATIC/UNKNOWN/MOVING of each kept pixel (see :mod:`change`), or None."""
 
     frame: Frame
     pixels: np.ndarray
     points_world: np.ndarray
     depth: np.ndarray
+    camera: CameraInfo | None = None
+    stride: int = 1
+    status: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
 class TimeCloud:
     """All views at one time, fused.  t: time [s].  views: the per-image clouds.
-    points: (M, 3) voxel-downsampled, outlier-filtered world points [m]; normals: (M, 3) unit."""
+    points: (M, 3) voxel-downsampled, outlier-filtered world points [m]."""
 
     t: float
     views: tuple[FrameCloud, ...]
     points: np.ndarray
-    normals: np.ndarray
+
+
+def decimated_camera(camera: CameraInfo, stride: int) -> CameraInfo:
+    """Intrinsics of the image sampled at every ``stride``-th row and column (pixel (r, c) of the
+    decimated image is pixel (stride·r, stride·c) of the original)."""
+    if stride == 1:
+        return camera
+    return dataclasses.replace(
+        camera, width=(camera.width + stride - 1) // stride, height=(camera.height + stride - 1) // stride,
+        fx=camera.fx / stride, fy=camera.fy / stride, cx=camera.cx / stride, cy=camera.cy / stride)
 
 
 def pixel_rays(camera: CameraInfo) -> np.ndarray:
@@ -114,27 +142,72 @@ def edge_mask(depth: np.ndarray, noise: DepthNoise) -> np.ndarray:
     return grown
 
 
-def frame_cloud(seq: Sequence, frame: Frame, noise: DepthNoise, depth: np.ndarray | None = None) -> FrameCloud:
-    """The world points of one frame's valid, non-edge pixels."""
+def frame_cloud(seq: Sequence, frame: Frame, noise: DepthNoise, depth: np.ndarray | None = None,
+                stride: int = 1) -> FrameCloud:
+    """The world points of one frame's valid, non-edge pixels, sampled at every ``stride``-th
+    row and column (``depth`` is the full-resolution image; read from disk when None)."""
     depth = seq.read_depth(frame) if depth is None else depth
-    cam = seq.cameras[frame.camera]
-    keep = np.isfinite(depth) & ~edge_mask(depth, noise)
-    pts = backproject(depth, cam, frame.T_world_camera)
+    cam = decimated_camera(seq.cameras[frame.camera], stride)
+    small = np.ascontiguousarray(depth[::stride, ::stride])
+    keep = np.isfinite(small) & ~edge_mask(small, noise)
     pixels = np.argwhere(keep)
-    return FrameCloud(frame, pixels, pts[keep], depth)
+    rays = np.stack([(pixels[:, 1] - cam.cx) / cam.fx, (pixels[:, 0] - cam.cy) / cam.fy, np.ones(len(pixels))], axis=1)
+    p_camera = rays * small[keep][:, None]
+    T = frame.T_world_camera
+    pts = p_camera @ T[:3, :3].T + T[:3, 3]
+    return FrameCloud(frame, pixels * stride, pts, small, cam, stride)
+
+
+def footprint(seq: Sequence, depths: list[np.ndarray]) -> float:
+    """Median full-resolution pixel footprint z/f [m] over the images."""
+    foot = [np.nanmedian(d) / seq.cameras[f.camera].fx for f, d in zip(seq.frames, depths) if np.isfinite(d).any()]
+    if not foot:
+        raise DataError(f"{seq.root}: no depth image holds a valid reading")
+    return float(np.median(foot))
 
 
 def voxel_size(seq: Sequence, depths: list[np.ndarray]) -> float:
     """Voxel edge [m]: VOXEL_FOOTPRINTS × the median pixel footprint z/f over the images."""
-    foot = [np.nanmedian(d) / seq.cameras[f.camera].fx for f, d in zip(seq.frames, depths) if np.isfinite(d).any()]
-    return VOXEL_FOOTPRINTS * float(np.median(foot))
+    return VOXEL_FOOTPRINTS * footprint(seq, depths)
 
 
-def fuse(t: float, views: list[FrameCloud], voxel: float) -> TimeCloud:
-    """Fuse the views of one time step: voxel downsampling, statistical outlier removal, normals."""
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.concatenate([v.points_world for v in views])))
-    pcd = pcd.voxel_down_sample(voxel)
-    if len(pcd.points) > OUTLIER_NEIGHBOURS:
+def pixel_stride(voxel: float, foot: float) -> int:
+    """Pixel stride giving about one sample per voxel per view (module doc)."""
+    return max(1, int(np.floor(voxel / foot + 1e-9)))
+
+
+def downsample(points: np.ndarray, voxel: float, outliers: bool = False) -> np.ndarray:
+    """(N, 3) points -> voxel centroids (open3d), optionally without statistical outliers."""
+    if len(points) == 0:
+        return np.zeros((0, 3))
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).voxel_down_sample(voxel)
+    if outliers and len(pcd.points) > OUTLIER_NEIGHBOURS:
         pcd, _ = pcd.remove_statistical_outlier(OUTLIER_NEIGHBOURS, OUTLIER_STD_RATIO)
-    pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=3 * voxel, max_nn=30))
-    return TimeCloud(t, tuple(views), np.asarray(pcd.points), np.asarray(pcd.normals))
+    return np.asarray(pcd.points)
+
+
+def static_voxel(n_static: int, voxel: float) -> float:
+    """Coarse voxel [m] that brings ``n_static`` points fused at ``voxel`` within STATIC_POINT_BUDGET
+    (areas scale with voxel²)."""
+    return voxel * max(1.0, float(np.sqrt(n_static / STATIC_POINT_BUDGET)))
+
+
+def fuse(t: float, views: list[FrameCloud], voxel: float, coarse: float | None = None) -> tuple[TimeCloud, np.ndarray]:
+    """Fuse the views of one time step.  Returns the :class:`TimeCloud` and its (M,) int8 status.
+
+    With per-pixel status in the views, points of each status are downsampled on their own
+    (moving and undecided ones at ``voxel`` with statistical outlier removal, static ones at
+    ``coarse``); without it, everything is fused at ``voxel`` and the status is UNKNOWN."""
+    from .change import MOVING, STATIC, UNKNOWN
+
+    pts = np.concatenate([v.points_world for v in views]) if views else np.zeros((0, 3))
+    if any(v.status is None for v in views):
+        fused = downsample(pts, voxel, outliers=True)
+        return TimeCloud(t, tuple(views), fused), np.full(len(fused), UNKNOWN, dtype=np.int8)
+    st = np.concatenate([v.status for v in views])
+    parts, status = [], []
+    for code, size, outl in ((MOVING, voxel, True), (UNKNOWN, voxel, True), (STATIC, coarse or voxel, False)):
+        p = downsample(pts[st == code], size, outliers=outl)
+        parts.append(p)
+        status.append(np.full(len(p), code, dtype=np.int8))
+    return TimeCloud(t, tuple(views), np.concatenate(parts)), np.concatenate(status)

@@ -4,17 +4,20 @@ part proposals with SE(3) tracks -> background planes.  ``perceive(seq)`` return
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 from tqdm import tqdm
 
 from ..errors import DataError
 from ..io.sequence import Sequence
 from ..io.tracks import PoseTracks
-from .change import STATIC, motion_status
-from .clouds import DepthNoise, TimeCloud, estimate_depth_noise, frame_cloud, fuse, voxel_size
+from .change import MOVING, STATIC, motion_status, pixel_status
+from .clouds import (NOISE_IMAGES, VOXEL_FOOTPRINTS, DepthNoise, FrameCloud, TimeCloud, downsample,
+                     estimate_depth_noise, footprint, frame_cloud, fuse, pixel_stride, static_voxel)
 from .segment import Plane, environment_planes
 from .track import ICP_FINE_VOXELS, Proposal, Tracker, propose_and_track
 
@@ -24,7 +27,7 @@ class Perception:
     """Output of the perception stages.
 
     times: (T,) [s].  clouds: per time step the fused cloud.  status: per step (M_t,)
-    STATIC/UNKNOWN/MOVING.  noise: the depth noise model.  voxel: voxel edge [m].
+    STATIC/UNKNOWN/MOVING (after tracking, every point on a tracked part is MOVING).  noise: the depth noise model.  voxel: voxel edge [m].
     proposals: tracked candidate parts.  tracks: their full-pose PoseTracks (one track per
     proposal, frame at the proposal centroid with world axes at its reference time).
     environment: background planes.  timing_s: seconds per stage."""
@@ -55,29 +58,78 @@ def _tracks(proposals: list[Proposal], times: np.ndarray) -> PoseTracks:
     return PoseTracks(times, tuple(p.name for p in proposals), P, R)
 
 
+def static_cameras(seq: Sequence, times: np.ndarray) -> bool:
+    """True when every camera has one frame per time step, all at one pose (the fast path of
+    :func:`change.pixel_status` applies)."""
+    for cam in seq.cameras:
+        frames = [f for f in seq.frames if f.camera == cam]
+        if len(frames) != times.size or len({f.t for f in frames}) != times.size:
+            return False
+        T0 = frames[0].T_world_camera
+        if any(not np.allclose(f.T_world_camera, T0, atol=1e-9) for f in frames):
+            return False
+    return True
+
+
+def _pixel_status_views(seq: Sequence, times: np.ndarray, views: list[list[FrameCloud]], noise: DepthNoise) -> list[list[FrameCloud]]:
+    """The views with per-pixel status from :func:`change.pixel_status`, one static camera at a
+    time (edge pixels count as no reading)."""
+    step_of = {t: i for i, t in enumerate(times)}
+    out = [list(v) for v in views]
+    for cam in seq.cameras:
+        where = [(i, k) for i, vs in enumerate(views) for k, v in enumerate(vs) if v.frame.camera == cam]
+        where.sort(key=lambda ik: step_of[views[ik[0]][ik[1]].frame.t])
+        stack = []
+        for i, k in where:
+            v = views[i][k]
+            d = np.full(v.depth.shape, np.nan, dtype=np.float32)
+            r, c = v.pixels[:, 0] // v.stride, v.pixels[:, 1] // v.stride
+            d[r, c] = v.depth[r, c]
+            stack.append(d)
+        st = pixel_status(np.stack(stack), noise)
+        for (i, k), s_img in zip(where, st):
+            v = views[i][k]
+            out[i][k] = dataclasses.replace(v, status=s_img[v.pixels[:, 0] // v.stride, v.pixels[:, 1] // v.stride])
+    return out
+
+
 def perceive(seq: Sequence, progress: tqdm | None = None) -> Perception:
     """Run the perception stages on a loaded sequence (see module doc of :mod:`perception`).
 
     Raises DataError when no part moves (no proposal survives)."""
     timing = {}
 
-    def stage(name, t0):
+    def stage(name, t0, tick=True):
         timing[name] = time.perf_counter() - t0
-        if progress is not None:
+        if progress is not None and tick:  # three ticks, as the caller's bar expects
             progress.update(1)
             progress.set_description(name)
         return time.perf_counter()
 
     t0 = time.perf_counter()
-    depths = {f.index: seq.read_depth(f) for f in seq.frames}
-    noise = estimate_depth_noise(list(depths.values()), seq.depth_scale)
-    voxel = voxel_size(seq, [depths[f.index] for f in seq.frames])
     times = seq.times
-    clouds = [fuse(t, [frame_cloud(seq, f, noise, depths[f.index]) for f in seq.frames_at(t)], voxel) for t in times]
-    t0 = stage("clouds", t0)
+    depths = {f.index: seq.read_depth(f) for f in seq.frames}
+    t0 = stage("load", t0, tick=False)
     if times.size < 2:
         raise DataError(f"{seq.root}: the sequence has one time step (t = {times[0]} s); motion needs at least two")
-    status = motion_status(clouds, seq.cameras, noise)
+    foot = footprint(seq, [depths[f.index] for f in seq.frames])
+    voxel = VOXEL_FOOTPRINTS * foot
+    stride = pixel_stride(voxel, foot)
+    pick = np.unique(np.round(np.linspace(0, len(seq.frames) - 1, min(NOISE_IMAGES, len(seq.frames)))).astype(int))
+    noise = estimate_depth_noise([depths[seq.frames[i].index][::stride, ::stride] for i in pick], seq.depth_scale)
+    views = [[frame_cloud(seq, f, noise, depths[f.index], stride) for f in seq.frames_at(t)] for t in times]
+    del depths
+    t0 = stage("clouds", t0)
+    if static_cameras(seq, times):
+        views = _pixel_status_views(seq, times, views, noise)
+        first = np.concatenate([v.points_world[v.status == STATIC] for v in views[0]])
+        coarse = static_voxel(len(downsample(first, voxel)), voxel)
+        fused = [fuse(t, vs, voxel, coarse) for t, vs in zip(times, views)]
+        clouds = [c for c, _ in fused]
+        status = [s for _, s in fused]
+    else:  # moving cameras: free-space tests between time steps on the fused points
+        clouds = [fuse(t, vs, voxel)[0] for t, vs in zip(times, views)]
+        status = motion_status(clouds, seq.cameras, noise)
     t0 = stage("motion", t0)
     tracker = Tracker(clouds, status, seq.cameras, noise, voxel)
     proposals = propose_and_track(tracker)
@@ -87,8 +139,16 @@ def perceive(seq: Sequence, progress: tqdm | None = None) -> Perception:
             f"noise (σ ≈ {1e3 * float(noise.sigma(1.0)):.2g} mm at 1 m); "
             "there is no joint to infer"
         )
-    static = np.concatenate([c.points[s == STATIC] for c, s in zip(clouds, status)])
-    everything = np.concatenate([c.points for c in clouds])
-    env = environment_planes(static, everything, ICP_FINE_VOXELS * voxel)
-    stage("proposals+tracks", t0)
+    radius = ICP_FINE_VOXELS * voxel
+    for s, c in enumerate(clouds):  # points on a tracked part move with it, whatever their own test said
+        on_part = np.zeros(len(c.points), dtype=bool)
+        for p in proposals:
+            moved = p.points_at(s)
+            if moved is not None:
+                on_part |= cKDTree(moved).query(c.points, distance_upper_bound=radius)[0] < np.inf
+        status[s] = np.where(on_part, np.int8(MOVING), status[s])
+    t0 = stage("proposals+tracks", t0, tick=False)
+    mid = times.size // 2
+    env = environment_planes(clouds[mid].points[status[mid] == STATIC], clouds[mid].points, radius)
+    stage("environment", t0)
     return Perception(times, clouds, status, noise, voxel, proposals, _tracks(proposals, times), env, timing)

@@ -29,15 +29,15 @@ MAX_PLANES = 4
 RANSAC_ITERATIONS = 1000
 
 
-def clusters(points: np.ndarray, voxel: float) -> list[np.ndarray]:
-    """Indices of each DBSCAN cluster of (N, 3) points [m] with at least MIN_PROPOSAL_POINTS
+def clusters(points: np.ndarray, voxel: float, min_points: int = MIN_PROPOSAL_POINTS) -> list[np.ndarray]:
+    """Indices of each DBSCAN cluster of (N, 3) points [m] with at least ``min_points``
     members, largest first."""
-    if len(points) < MIN_PROPOSAL_POINTS:
+    if len(points) < max(min_points, 1):
         return []
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     labels = np.asarray(pcd.cluster_dbscan(eps=CLUSTER_VOXELS * voxel, min_points=4))
     out = [np.flatnonzero(labels == k) for k in range(labels.max() + 1)]
-    return sorted((c for c in out if len(c) >= MIN_PROPOSAL_POINTS), key=len, reverse=True)
+    return sorted((c for c in out if len(c) >= min_points), key=len, reverse=True)
 
 
 @dataclass(frozen=True)

@@ -1,22 +1,27 @@
-"""SE(3) tracks of part proposals through the sequence (open3d ICP with verified candidates).
+"""SE(3) tracks of part proposals through the sequence (trimmed point-to-point ICP on KD-trees
+built once per time step, candidates verified by free-space tests).
 
 A proposal is a cluster of moving points at its reference time r.  Its motion ΔT(s) (world
 frame, ΔT(r) = I, so the track stays anchored to the reference) is solved outward from r, one
-time step at a time.  Frames far apart in time can hold large motions (a door swinging 70°
-between two samples), so ICP is started from several candidate poses:
+time step at a time, from two candidate poses: the neighbouring solved pose and its
+constant-velocity extrapolation (a door swinging fast between two samples).  Each candidate is
+refined by ICP (coarse radius ICP_COARSE_VOXELS, then fine radius ICP_FINE_VOXELS; point-to-point,
+as point-to-plane would let a flat part slide in its own plane) against the non-static fused
+points at s (static surfaces flush with a part, like a cabinet's front frame around a closed
+door, would let it slide) — a part at rest where it is static (a closed drawer's front) finds
+few correspondences and keeps its guess, which the images then confirm — and then *verified* by the free-space tests of :mod:`change` against every depth image at s: the score is
+the share of the proposal's points consistent with the images minus the share the images saw
+through.  A candidate is acceptable when its points are mostly consistent.  Only when both
+candidates fail are principal-axes alignments onto the moving clusters at s tried
+(re-detection; they also fit a symmetric part flipped).  With no acceptable candidate the
+proposal is unobserved at s (NaN: occluded or out of view), and the next step starts from the
+last solved pose.
 
-* the neighbouring solved pose, and its constant-velocity extrapolation;
-* principal-axes alignments of the proposal onto every moving cluster at s (4 proper rotations).
-
-Each candidate is refined by point-to-point ICP (coarse then fine radius; point-to-plane would
-let a flat part slide in its own plane) against the non-static points at s, then *verified* by
-the free-space tests of :mod:`change` against every depth image at s: the score is the share of
-the proposal's points consistent with the images minus the share the images saw through.  A
-candidate is acceptable when its points are mostly consistent.  Continuity first: the best
-acceptable candidate started from the previous pose wins; the principal-axes candidates (which
-also fit a symmetric part flipped) are used only when tracking from the previous pose is lost
-(re-detection).  With no acceptable candidate the proposal is unobserved at s (NaN: occluded or
-out of view), and the next step starts from the last solved pose.
+Growing: a moving part's points near a hinge move less than the free-space test can resolve
+(τ ≈ 3√2 σ_z), so the moving cluster misses a strip along the axis.  After tracking, points of
+the reference cloud next to the proposal are added when the track explains them better than the
+static hypothesis: moved along the track they land on an observed surface (within the fine ICP
+radius) at more time steps than they do left in place.
 """
 
 from __future__ import annotations
@@ -24,23 +29,33 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import open3d as o3d
 from scipy.spatial import cKDTree
 
 from ..io.sequence import CameraInfo
 from .change import MOVING, STATIC, free_space_test, window_stack
 from .clouds import DepthNoise, TimeCloud
-from .segment import clusters
+from .segment import CLUSTER_VOXELS, clusters
 
 # ICP correspondence radii in voxels: coarse (captures the candidate's basin), then fine.
-ICP_COARSE_VOXELS = 3.0
+ICP_COARSE_VOXELS = 4.0
 ICP_FINE_VOXELS = 1.5
-ICP_ITERATIONS = 30
+ICP_ITERATIONS = 20
+# ICP stops when an iteration moves the points by less than this share of a voxel.
+ICP_TOLERANCE_VOXELS = 0.01
+# ICP and verification use at most this many of a proposal's points (a fixed random subset).
+MAX_TRACK_POINTS = 1500
 # A pose is accepted when at least this share of the proposal's tested points are consistent
 # with the images (majority vote) ...
 MIN_CONSISTENT_SHARE = 0.5
 # ... and at most this share of them lie in space the cameras saw through.
 MAX_VIOLATED_SHARE = 0.1
+# Smallest moving part tracked [m²]: a 10 cm square (a drawer front, a lid, a door are far
+# larger; smaller clusters of moving points are speckle or a part's fringe).
+MIN_PART_AREA = 0.01
+MIN_PROPOSAL_POINTS = 20
+# Growing: rounds of CLUSTER_VOXELS each, and time steps compared per round.
+GROW_ROUNDS = 8
+GROW_STEPS = 10
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,13 +76,6 @@ class Proposal:
         if not np.all(np.isfinite(T)):
             return None
         return self.points @ T[:3, :3].T + T[:3, 3]
-
-
-def _pcd(points: np.ndarray, normals: np.ndarray | None = None) -> o3d.geometry.PointCloud:
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    if normals is not None:
-        pcd.normals = o3d.utility.Vector3dVector(normals)
-    return pcd
 
 
 def _principal_frame(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -95,6 +103,39 @@ def pca_alignments(source: np.ndarray, target: np.ndarray) -> list[np.ndarray]:
     return out
 
 
+def kabsch(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """(4, 4) rigid transform minimising Σ|T a_i − b_i|² for (N, 3) point pairs."""
+    ca, cb = A.mean(axis=0), B.mean(axis=0)
+    U, _, Vt = np.linalg.svd((A - ca).T @ (B - cb))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, cb - R @ ca
+    return T
+
+
+def icp(source: np.ndarray, tree: cKDTree, target: np.ndarray, T0: np.ndarray, radii: tuple[float, ...],
+        iterations: int = ICP_ITERATIONS, tolerance: float = 0.0) -> np.ndarray:
+    """Trimmed point-to-point ICP of (N, 3) ``source`` onto ``target`` (M, 3) with its KD-tree:
+    correspondences beyond the current radius [m] are dropped; one pass per radius (coarse to
+    fine) from the (4, 4) initial world motion ``T0``; stops a pass when the points move by less
+    than ``tolerance`` [m]."""
+    T = np.array(T0, dtype=float)
+    for r in radii:
+        for _ in range(iterations):
+            moved = source @ T[:3, :3].T + T[:3, 3]
+            d, idx = tree.query(moved, distance_upper_bound=r)
+            ok = d < r
+            if ok.sum() < 6:
+                break
+            dT = kabsch(moved[ok], target[idx[ok]])
+            T = dT @ T
+            step = np.abs(moved @ (dT[:3, :3] - np.eye(3)).T + dT[:3, 3]).max()
+            if step < tolerance:
+                break
+    return T
+
+
 class Tracker:
     """Tracks proposals through fused time clouds (see module doc).
 
@@ -104,45 +145,57 @@ class Tracker:
     def __init__(self, clouds: list[TimeCloud], status: list[np.ndarray], cameras: dict[str, CameraInfo],
                  noise: DepthNoise, voxel: float):
         self.clouds, self.status, self.cameras, self.noise, self.voxel = clouds, status, cameras, noise, voxel
-        self.ranges = [[window_stack(v.depth) for v in c.views] for c in clouds]
-        self.targets = []
-        self.moving_clusters = []
-        for c, s in zip(clouds, status):
-            keep = s != STATIC
-            self.targets.append(_pcd(c.points[keep], c.normals[keep]))
-            moving = c.points[s == MOVING]
-            self.moving_clusters.append([moving[i] for i in clusters(moving, voxel)])
+        self.targets = [c.points[s != STATIC] for c, s in zip(clouds, status)]
+        self.trees = [cKDTree(t) if len(t) else None for t in self.targets]
+        self._windows: dict[int, list[np.ndarray]] = {}
+        self._full_trees: dict[int, cKDTree] = {}
+        self._moving_clusters: dict[int, list[np.ndarray]] = {}
+        self.min_points = max(MIN_PROPOSAL_POINTS, int(MIN_PART_AREA / voxel**2))
+
+    def full_tree(self, s: int) -> cKDTree:
+        """KD-tree of every fused point at step s (built on first use)."""
+        if s not in self._full_trees:
+            self._full_trees[s] = cKDTree(self.clouds[s].points)
+        return self._full_trees[s]
+
+    def windows(self, s: int) -> list[np.ndarray]:
+        if s not in self._windows:
+            self._windows[s] = [window_stack(v.depth) for v in self.clouds[s].views]
+        return self._windows[s]
+
+    def moving_clusters(self, s: int) -> list[np.ndarray]:
+        if s not in self._moving_clusters:
+            moving = self.clouds[s].points[self.status[s] == MOVING]
+            self._moving_clusters[s] = [moving[i] for i in clusters(moving, self.voxel, self.min_points)]
+        return self._moving_clusters[s]
 
     def verify(self, points: np.ndarray, s: int) -> tuple[float, float]:
         """(consistent share, violated share) of (N, 3) world points against the images at step
         s: the share of points some image confirms, and of points only seen through."""
         cons = np.zeros(len(points), dtype=int)
         viol = np.zeros(len(points), dtype=int)
-        for view, window in zip(self.clouds[s].views, self.ranges[s]):
-            v = free_space_test(points, self.cameras[view.frame.camera], view.frame.T_world_camera, window, self.noise)
+        for view, window in zip(self.clouds[s].views, self.windows(s)):
+            cam = view.camera or self.cameras[view.frame.camera]
+            v = free_space_test(points, cam, view.frame.T_world_camera, window, self.noise)
             cons += v > 0
             viol += v < 0
         return float(np.mean(cons > 0)), float(np.mean((viol > 0) & (cons == 0)))
 
-    def _icp(self, source: o3d.geometry.PointCloud, s: int, T0: np.ndarray) -> np.ndarray:
-        target = self.targets[s]
-        T = T0
-        reg = o3d.pipelines.registration
-        for radius in (ICP_COARSE_VOXELS * self.voxel, ICP_FINE_VOXELS * self.voxel):
-            T = reg.registration_icp(source, target, radius, T, reg.TransformationEstimationPointToPoint(),
-                                     reg.ICPConvergenceCriteria(max_iteration=ICP_ITERATIONS)).transformation
-        return np.asarray(T)
+    def _icp(self, points: np.ndarray, s: int, T0: np.ndarray) -> np.ndarray:
+        return icp(points, self.trees[s], self.targets[s], T0,
+                   (ICP_COARSE_VOXELS * self.voxel, ICP_FINE_VOXELS * self.voxel),
+                   tolerance=ICP_TOLERANCE_VOXELS * self.voxel)
 
     def solve_step(self, points: np.ndarray, s: int, guesses: list[np.ndarray]) -> np.ndarray | None:
         """Best verified (4, 4) world motion of (N, 3) reference points to step s, or None."""
-        if len(self.targets[s].points) < 3:
+        if self.trees[s] is None or len(self.targets[s]) < 3:
             return None
-        source = _pcd(points)
-        pca = [T for cluster in self.moving_clusters[s] for T in pca_alignments(points, cluster)]
-        for cands in (guesses, pca):
+        for cands in (guesses, None):
+            if cands is None:  # re-detection
+                cands = [T for cluster in self.moving_clusters(s) for T in pca_alignments(points, cluster)]
             best, best_score = None, -np.inf
             for T0 in cands:
-                T = self._icp(source, s, T0)
+                T = self._icp(points, s, T0)
                 cons, viol = self.verify(points @ T[:3, :3].T + T[:3, 3], s)
                 if cons - viol > best_score and cons >= MIN_CONSISTENT_SHARE and viol <= MAX_VIOLATED_SHARE:
                     best, best_score = T, cons - viol
@@ -151,8 +204,11 @@ class Tracker:
         return None
 
     def track(self, name: str, ref: int, points: np.ndarray) -> Proposal:
-        """Track (N, 3) world points of step ``ref`` through every step (module doc)."""
+        """Track (N, 3) world points of step ``ref`` through every step, then grow the
+        proposal (module doc)."""
         n = len(self.clouds)
+        rng = np.random.default_rng(0)
+        sample = points if len(points) <= MAX_TRACK_POINTS else points[rng.choice(len(points), MAX_TRACK_POINTS, replace=False)]
         Ts = np.full((n, 4, 4), np.nan)
         Ts[ref] = np.eye(4)
         for direction in (1, -1):
@@ -162,24 +218,63 @@ class Tracker:
                 guesses = [solved[-1]]
                 if len(solved) >= 2:
                     guesses.append(solved[-1] @ np.linalg.inv(solved[-2]) @ solved[-1])
-                T = self.solve_step(points, s, guesses)
+                T = self.solve_step(sample, s, guesses)
                 if T is not None:
                     Ts[s] = T
                     solved.append(T)
                 s += direction
-        return Proposal(name, ref, points, Ts)
+        return Proposal(name, ref, self.grow(ref, points, Ts), Ts)
+
+    def grow(self, ref: int, points: np.ndarray, Ts: np.ndarray) -> np.ndarray:
+        """(N', 3) ``points`` plus the reference cloud's points next to them that the track
+        ``Ts`` (T, 4, 4) explains better than the static hypothesis (module doc)."""
+        obs = [s for s in range(len(Ts)) if s != ref and np.all(np.isfinite(Ts[s])) and len(self.clouds[s].points)]
+        if not obs:
+            return points
+        # the steps where the part moved most from its reference pose discriminate best
+        reach = np.linalg.norm(points.max(axis=0) - points.min(axis=0))
+        disp = [np.linalg.norm(Ts[s][:3, :3] - np.eye(3)) * reach + np.linalg.norm(Ts[s][:3, 3]) for s in obs]
+        steps = [obs[k] for k in np.argsort(disp)[::-1][:GROW_STEPS]]
+        cloud = self.clouds[ref].points
+        in_part = np.zeros(len(cloud), dtype=bool)
+        in_part[cKDTree(points).query(cloud, distance_upper_bound=1e-9)[0] < 1e-9] = True
+        fine = ICP_FINE_VOXELS * self.voxel
+        reach_r = CLUSTER_VOXELS * self.voxel
+        tested = in_part.copy()
+        part = points
+        for _ in range(GROW_ROUNDS):
+            near = cKDTree(part).query(cloud, distance_upper_bound=reach_r)[0] < np.inf
+            cand = np.flatnonzero(near & ~tested)
+            if cand.size == 0:
+                break
+            tested[cand] = True
+            x = cloud[cand]
+            part_hits = np.zeros(cand.size, dtype=int)
+            static_hits = np.zeros(cand.size, dtype=int)
+            for s in steps:
+                T = Ts[s]
+                tree = self.full_tree(s)
+                part_hits += tree.query(x @ T[:3, :3].T + T[:3, 3], distance_upper_bound=fine)[0] < np.inf
+                static_hits += tree.query(x, distance_upper_bound=fine)[0] < np.inf
+            take = (part_hits > static_hits) & (2 * part_hits >= len(steps))
+            if not take.any():
+                break
+            in_part[cand[take]] = True
+            part = np.concatenate([part, x[take]])
+        return part
 
 
 def propose_and_track(tracker: Tracker) -> list[Proposal]:
     """Proposals from the moving points of every time step (most moving points first): moving
     points not yet explained by a tracked proposal (within ICP_FINE_VOXELS voxels of its moved
-    points) are clustered into new proposals, and each is tracked through the sequence."""
+    points) are clustered into new proposals of at least ``tracker.min_points`` points, and each
+    is tracked through the sequence."""
     order = np.argsort([-np.sum(s == MOVING) for s in tracker.status], kind="stable")
     proposals: list[Proposal] = []
     radius = ICP_FINE_VOXELS * tracker.voxel
     for r in order:
         moving = tracker.clouds[r].points[tracker.status[r] == MOVING]
-        if len(moving) == 0:
+        if len(moving) < tracker.min_points:
             continue
         explained = np.zeros(len(moving), dtype=bool)
         for p in proposals:
@@ -187,6 +282,8 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
             if moved is not None:
                 explained |= cKDTree(moved).query(moving, distance_upper_bound=radius)[0] < np.inf
         rest = moving[~explained]
-        for idx in clusters(rest, tracker.voxel):
+        if len(rest) < tracker.min_points:
+            continue
+        for idx in clusters(rest, tracker.voxel, tracker.min_points):
             proposals.append(tracker.track(f"p{len(proposals)}", int(r), rest[idx]))
     return proposals
