@@ -75,7 +75,7 @@ class ScrewOptions:
     coarse_to_fine: bool = True
     points_per_part: int = 200
     rounds: int = 6
-    substep_s: float = 1.0 / 30.0
+    substep_s: float = 0.1
     dyn_sigma: float = 0.1
     energy_sigma: float = 0.05
     energy_tolerance: float = 0.02
