@@ -135,12 +135,12 @@ class MainDemoReport:
     """What the main demo did.  joints: per reconstructed joint, its record plus ``axis_error_deg``
     and ``origin_error_m`` against the matched true joint (None when unmatched).
     verification: reconstruction.json's verification; verification_diagnosed: the same check of the
-    model the diagnosis augmented.  effects: the diagnosis' effects (dicts).
+    model the diagnosis augmented (None when it added nothing).  effects: the diagnosis' effects (dicts).
     truth_effects: the concealed effects.  timing_s: per stage.  paths: what was written where."""
 
     joints: list[dict]
     verification: dict
-    verification_diagnosed: dict
+    verification_diagnosed: dict | None
     effects: list[dict]
     truth_effects: list[dict]
     diagnosis_summary: str
@@ -150,7 +150,7 @@ class MainDemoReport:
     def summary(self) -> str:
         lines = ["reconstructed joints (errors against the ground truth):"]
         for j in self.joints:
-            err = ("" if j.get("axis_error_deg") is None else
+            err = ("  (no true joint left to match: spurious)" if j.get("axis_error_deg") is None else
                    f"  axis error {j['axis_error_deg']:.2f}°, origin error {100 * j['origin_error_m']:.1f} cm "
                    f"(true joint {j['true_joint']})")
             lines.append(f"  {j['name']}: {j['type']} {j['parent']} -> {j['child']}{err}")
@@ -167,12 +167,15 @@ class MainDemoReport:
         truth = ", ".join(f"{e['type']} = {e['value']:g} {e.get('unit', '')} on {e['joint']}" for e in self.truth_effects)
         lines.append(f"  concealed in the ground truth: {truth or 'nothing'}")
         a = self.verification_diagnosed
-        lines.append(f"Drake verification of the diagnosed model: drift {drift(a)}; energy residual "
-                     f"{a['energy_residual']:.3f}")
+        if a is None:
+            lines.append("Drake verification of the diagnosed model: no effect was added (same model as above)")
+        else:
+            lines.append(f"Drake verification of the diagnosed model: drift {drift(a)}; energy residual "
+                         f"{a['energy_residual']:.3f}")
         lines.append("time per stage: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.timing_s.items()))
         lines.append("files:")
         for k, p in self.paths.items():
-            lines.append(f"  {k:10s} {p}")
+            lines.append(f"  {k:15s} {p}")
         return "\n".join(lines)
 
 
@@ -274,11 +277,13 @@ def run_main_demo(out_dir: str | Path, seed: int = 0, frames: int = DEMO_SIZE["f
     shutil.copytree(rec_dir / "meshes", diag_dir / "meshes", dirs_exist_ok=True)
     timing["diagnose"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    say("    … and the diagnosed model verified in Drake the same way")
-    after = verify_model(d.model, rec_dir, paths.sequence)
-    write_text_atomic(diag_dir / "verification.json", json.dumps(after, indent=2))
-    timing["verify diagnosed"] = time.perf_counter() - t0
+    after = None
+    if d.effects:
+        t0 = time.perf_counter()
+        say("    … and the diagnosed model verified in Drake the same way")
+        after = verify_model(d.model, rec_dir, paths.sequence)
+        write_text_atomic(diag_dir / "verification.json", json.dumps(after, indent=2))
+        timing["verify diagnosed"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     say("5/5 writing the meshcat scene …")
