@@ -24,7 +24,8 @@ on a reconstruction (first argument = a folder written by `kinemaforge reconstru
 
 outputs: OUT/diagnosis.json, OUT/model.urdf, OUT/residual_time.png, OUT/residual_state.png,
          OUT/fit_before_after.png (+ OUT/recording.csv, OUT/meshes/ on a reconstruction, and
-         OUT/verification.json: the augmented model through the reconstruction's Drake check)
+         OUT/verification.json: the augmented model through the reconstruction's Drake check,
+         when an effect was added)
 
 examples:
   kinemaforge diagnose models/furuta/furuta.urdf qube.csv -o out/qube
@@ -93,7 +94,7 @@ def run(args) -> int:
         d = dataclasses.replace(d, model=limits_from(d.model, nominal))
     paths = write_diagnosis(d, rec, args.out, with_drift=not args.no_drift)
     print(d.summary())
-    if reconstructed and not args.no_drift:  # the augmented model through the reconstruction's Drake check
+    if reconstructed and not args.no_drift and d.effects:  # the augmented model through the reconstruction's Drake check
         import json
         from pathlib import Path
 
