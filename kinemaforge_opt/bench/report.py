@@ -168,7 +168,11 @@ def write_report(result: dict, out_dir: str | Path) -> dict[str, Path]:
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    sections = [f"# kinemaforge bench ({result['size']})\n\n{result['machine']}; total {result['total_s']:.0f} s\n"]
+    load = result.get("load_average_start")
+    notes = "".join([f"; code {result['revision']}" if result.get("revision") else "",
+                     f"; load average (1 min) {load[0]:.1f} at start, {result['load_average_end'][0]:.1f} at end"
+                     if load and result.get("load_average_end") else ""])
+    sections = [f"# kinemaforge bench ({result['size']})\n\n{result['machine']}; total {result['total_s']:.0f} s{notes}\n"]
     if "discovery" in result:
         sections.append(discovery_tables(result["discovery"]["summary"], result["discovery"]["cases"]))
     if "sturm" in result:

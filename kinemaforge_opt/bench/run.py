@@ -48,6 +48,22 @@ def machine() -> str:
     return f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"
 
 
+def revision() -> str | None:
+    """The repository's commit (with "+dirty" when tracked files differ from it), or None outside
+    a git checkout: a benchmark figure names the code it measured."""
+    import subprocess
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    try:
+        head = subprocess.run(["git", "-C", root, "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                              timeout=10, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", root, "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=10, check=True).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return head + ("+dirty" if dirty else "")
+
+
 def run_bench(size: Size, cases: list[str] | None = None, progress=None, out_dir=None,
               parts: tuple[str, ...] = PARTS, cache=None) -> dict:
     """Run the chosen ``parts`` of the benchmark (all by default); returns the result document
@@ -58,7 +74,8 @@ def run_bench(size: Size, cases: list[str] | None = None, progress=None, out_dir
 
     say = progress or (lambda s: None)
     t_start = time.perf_counter()
-    result = {"size": size.name, "machine": machine(), "parts": list(parts)}
+    result = {"size": size.name, "machine": machine(), "revision": revision(), "parts": list(parts),
+              "load_average_start": list(os.getloadavg())}
     stage = {}
     if "discovery" in parts:
         scores = []
@@ -98,4 +115,5 @@ def run_bench(size: Size, cases: list[str] | None = None, progress=None, out_dir
                 np.mean([r["timing_s"][k] for r in t1 if k in r["timing_s"]]))
     result["stage_time_s"] = stage
     result["total_s"] = time.perf_counter() - t_start
+    result["load_average_end"] = list(os.getloadavg())
     return result
