@@ -428,7 +428,10 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
     # --- states ------------------------------------------------------------------------------
     G = t_grid.size
     if use_dyn:
-        X = prob.variable("x", (2 * n, G), init=np.vstack([q0.T, v0.T]))
+        lower, upper = np.full((2 * n, G), -np.inf), np.full((2 * n, G), np.inf)
+        if not options.vis:  # nothing observes q: hold the observed steps at the current values
+            lower[:n, frame_cols] = upper[:n, frame_cols] = q0.T[:, frame_cols]
+        X = prob.variable("x", (2 * n, G), init=np.vstack([q0.T, v0.T]), lower=lower, upper=upper)
         Q, V = X[:n, :], X[n:, :]
     else:
         lower = upper = None
@@ -604,11 +607,12 @@ def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
 def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> ScrewResult:
     """Coarse-to-fine refinement of the closed-form joints in ``data`` (see module doc).
 
-    Stages: ``vis`` warm-up (``options.rounds`` solves on the frame grid, correspondences refreshed
-    before each) then the full objective on the dense grid (correspondences refreshed once more);
-    without coarse-to-fine, one full solve with the correspondences of the closed form.  A stage
-    that does not converge is recorded (``success`` False) and its iterate is kept only if it
-    lowered that stage's objective."""
+    Stages: ``vis`` warm-up (up to ``options.rounds`` solves on the frame grid, correspondences and
+    IRLS weights refreshed before each, the robust width annealed from half the gate down to
+    ``data.delta``; stops early once a round moves nothing) then the full objective on the dense
+    grid (correspondences refreshed once more); without coarse-to-fine, one full solve with the
+    correspondences of the closed form.  A stage that does not converge is recorded (``success``
+    False, IPOPT's status kept) and the next stage starts from its last iterate."""
     options = options or ScrewOptions()
     start = time.perf_counter()
     state = initial_state(data)
@@ -626,8 +630,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         t0 = time.perf_counter()
         sp = build_screw_problem(data, opts, state, corr, dense)
         res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn))
-        improved = res.success or np.isfinite(res.objective)
-        if improved:
+        if np.isfinite(res.objective):
             state = read_solution(sp, res)
         stages.append({"stage": name, "iterations": res.iterations, "success": res.success, "status": res.status,
                        "time_s": time.perf_counter() - t0, "solve_s": res.solve_time_s,

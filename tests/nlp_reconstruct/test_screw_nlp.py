@@ -24,6 +24,9 @@ from kinemaforge_opt.spatial import axis_angle_error, exp_so3, line_distance, ma
 
 from .worlds import door_model, exact_data, pushed_trajectory
 
+# The push stops abruptly at 0.5 s: collocation steps of 1/30 s resolve it (at the default 0.1 s the
+# discretisation error of the dynamics biases the axis by ~0.13° on this door).
+FINE = 1.0 / 30.0
 AXIS = normalize([0.05, -0.03, 1.0])
 ORIGIN = np.array([0.3, 0.2, 0.1])
 TILT = exp_so3(normalize([1.0, 1.0, 0.0]) * np.radians(3.0))  # 3° error of the closed form
@@ -85,7 +88,7 @@ def test_prismatic_joint_axis_is_recovered():
 
 def test_full_objective_recovers_axis_damping_and_mass_scale(pushed):
     true, data, q = pushed
-    r = refine_screws(data, ScrewOptions(energy="soft"))
+    r = refine_screws(data, ScrewOptions(energy="soft", substep_s=FINE))
     axis_deg, origin_m = _errors(r.model)
     assert r.success
     assert axis_deg < 0.1 and origin_m < 1e-3
@@ -101,7 +104,7 @@ def test_full_objective_recovers_axis_damping_and_mass_scale(pushed):
 
 def test_hard_energy_constraint_converges_and_holds(pushed):
     true, data, q = pushed
-    opts = ScrewOptions(energy="hard", energy_tolerance=0.01)
+    opts = ScrewOptions(energy="hard", energy_tolerance=0.01, substep_s=FINE)
     r = refine_screws(data, opts)
     assert r.success
     assert _errors(r.model)[0] < 0.1
