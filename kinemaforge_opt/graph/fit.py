@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
+from scipy.sparse import csr_matrix
 from scipy.spatial.transform import Rotation
 
 from ..spatial import normalize
@@ -27,6 +27,9 @@ JOINT_TYPES = ("rigid", "prismatic", "revolute", "helical")
 # Refinement budget: well-posed fits converge in 5–40 evaluations; a helix on a short arc is
 # nearly degenerate (pitch trades against axis tilt) and is stopped here rather than polished.
 MAX_NFEV = 60
+# Problems with at most this many unknowns get a dense Jacobian and an exact trust-region step
+# (faster than sparse LSMR up to here; beyond, the dense SVD grows as N³).
+DENSE_MAX_PARAMS = 150
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,8 +81,34 @@ def _tangent_basis(a: np.ndarray) -> np.ndarray:
 
 
 def _rot(axis_angles: np.ndarray) -> np.ndarray:
-    """(N, 3) rotation vectors -> (N, 3, 3) matrices."""
-    return Rotation.from_rotvec(axis_angles).as_matrix()
+    """(N, 3) rotation vectors -> (N, 3, 3) matrices (Rodrigues, vectorised; the fits call this
+    thousands of times, where scipy's Rotation spends most of its time validating)."""
+    w = np.asarray(axis_angles, dtype=float)
+    th2 = np.einsum("ni,ni->n", w, w)
+    th = np.sqrt(th2)
+    small = th < 1e-4
+    ths = np.where(small, 1.0, th)
+    a = np.where(small, 1.0 - th2 / 6.0, np.sin(ths) / ths)
+    b = np.where(small, 0.5 - th2 / 24.0, (1.0 - np.cos(ths)) / np.where(small, 1.0, th2))
+    K = np.zeros(w.shape[:1] + (3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = w[:, 2], -w[:, 1], w[:, 0]
+    return np.eye(3) + a[:, None, None] * K + b[:, None, None] * (K @ K)
+
+
+def _log(Rs: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) rotation matrices -> (N, 3) rotation vectors (vectorised; scipy for the rare
+    angles within 1e-3 rad of π, where the skew part vanishes)."""
+    cos = np.clip((np.einsum("nii->n", Rs) - 1.0) / 2.0, -1.0, 1.0)
+    th = np.arccos(cos)
+    v = np.stack([Rs[:, 2, 1] - Rs[:, 1, 2], Rs[:, 0, 2] - Rs[:, 2, 0], Rs[:, 1, 0] - Rs[:, 0, 1]], axis=1)
+    small = th < 1e-4
+    f = np.where(small, 0.5 + th**2 / 12.0, th / (2.0 * np.sin(np.where(small, 1.0, th))))
+    out = v * f[:, None]
+    near_pi = th > np.pi - 1e-3
+    if near_pi.any():
+        out[near_pi] = Rotation.from_matrix(Rs[near_pi]).as_rotvec()
+    return out
 
 
 def _robust_chi2(r: np.ndarray) -> float:
@@ -88,19 +117,42 @@ def _robust_chi2(r: np.ndarray) -> float:
 
 
 def _solve(fun, x0: np.ndarray, n_global: int, n_latent: int, rows_per_sample: int):
-    """Robust sparse least squares: global parameters touch every residual, latent value i only
-    its own ``rows_per_sample`` residuals."""
+    """Robust least squares where the global parameters touch every residual and latent value i
+    only its own ``rows_per_sample`` residuals.  The Jacobian is taken by forward differences in
+    n_global + 1 evaluations (all latent values are perturbed at once: their rows are disjoint)
+    and handed over dense for small problems, as CSR (LSMR trust region) for large ones."""
+    if not n_latent:
+        res = least_squares(fun, x0, loss="soft_l1", f_scale=1.0, method="trf", x_scale="jac", max_nfev=MAX_NFEV)
+        return res.x, res.fun
+    n = n_global + n_latent
     m = n_latent * rows_per_sample
-    if n_latent:
-        S = lil_matrix((m, n_global + n_latent), dtype=int)
-        S[:, :n_global] = 1
-        for i in range(n_latent):
-            S[i * rows_per_sample : (i + 1) * rows_per_sample, n_global + i] = 1
-    else:
-        S = None
-    res = least_squares(
-        fun, x0, jac_sparsity=S, loss="soft_l1", f_scale=1.0, method="trf", x_scale="jac", max_nfev=MAX_NFEV
-    )
+    sample = np.arange(m) // rows_per_sample
+    dense = n <= DENSE_MAX_PARAMS
+    if not dense:
+        cols = np.concatenate([np.tile(np.arange(n_global), (m, 1)), n_global + sample[:, None]], axis=1)
+        indptr = np.arange(m + 1) * (n_global + 1)
+    eps = np.sqrt(np.finfo(float).eps)
+
+    def jac(x, f0=None):
+        f0 = fun(x) if f0 is None else f0
+        h = eps * np.maximum(1.0, np.abs(x))
+        Jg = np.empty((m, n_global))
+        for i in range(n_global):
+            xp = x.copy()
+            xp[i] += h[i]
+            Jg[:, i] = (fun(xp) - f0) / h[i]
+        xp = x.copy()
+        xp[n_global:] += h[n_global:]
+        Jl = (fun(xp) - f0) / h[n_global:][sample]
+        if dense:
+            J = np.zeros((m, n))
+            J[:, :n_global] = Jg
+            J[np.arange(m), n_global + sample] = Jl
+            return J
+        return csr_matrix((np.concatenate([Jg, Jl[:, None]], axis=1).ravel(), cols.ravel(), indptr), shape=(m, n))
+
+    res = least_squares(fun, x0, jac=jac, loss="soft_l1", f_scale=1.0, method="trf", x_scale="jac",
+                        max_nfev=MAX_NFEV, tr_solver="exact" if dense else "lsmr")
     return res.x, res.fun
 
 
@@ -133,7 +185,7 @@ def _orient(axis: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _rot_residual(R_model: np.ndarray, Rs: np.ndarray) -> np.ndarray:
-    return Rotation.from_matrix(np.einsum("nji,njk->nik", R_model, Rs)).as_rotvec()
+    return _log(np.einsum("nji,njk->nik", R_model, Rs))
 
 
 def _chordal_mean(Rs: np.ndarray) -> np.ndarray:

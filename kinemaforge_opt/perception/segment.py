@@ -27,6 +27,9 @@ PLANE_MIN_SHARE = 0.05
 OUTSIDE_SHARE = 0.01
 MAX_PLANES = 4
 RANSAC_ITERATIONS = 1000
+# RANSAC and the one-side test use a random subset of at most this many points (a plane holding
+# 5 % of them still has 250 inliers).
+RANSAC_MAX_POINTS = 5000
 
 
 def clusters(points: np.ndarray, voxel: float, min_points: int = MIN_PROPOSAL_POINTS) -> list[np.ndarray]:
@@ -57,6 +60,11 @@ def environment_planes(static_points: np.ndarray, all_points: np.ndarray, thresh
     """Background planes among (N, 3) static points [m] (module doc); ``all_points`` (M, 3) is
     the whole scene used for the one-side test; ``threshold`` [m] the inlier distance."""
     o3d.utility.random.seed(seed)
+    rng = np.random.default_rng(seed)
+    if len(static_points) > RANSAC_MAX_POINTS:
+        static_points = static_points[rng.choice(len(static_points), RANSAC_MAX_POINTS, replace=False)]
+    if len(all_points) > RANSAC_MAX_POINTS:
+        all_points = all_points[rng.choice(len(all_points), RANSAC_MAX_POINTS, replace=False)]
     pool = static_points
     planes = []
     for _ in range(MAX_PLANES):

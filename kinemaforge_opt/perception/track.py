@@ -3,8 +3,9 @@ built once per time step, candidates verified by free-space tests).
 
 A proposal is a cluster of moving points at its reference time r.  Its motion ΔT(s) (world
 frame, ΔT(r) = I, so the track stays anchored to the reference) is solved outward from r, one
-time step at a time, from two candidate poses: the neighbouring solved pose and its
-constant-velocity extrapolation (a door swinging fast between two samples).  Each candidate is
+time step at a time, from the constant-velocity extrapolation of the neighbouring solved poses
+(a door swinging fast between two samples) or, when that fails verification, the neighbouring
+pose itself.  Each candidate is
 refined by ICP (coarse radius ICP_COARSE_VOXELS, then fine radius ICP_FINE_VOXELS; point-to-point,
 as point-to-plane would let a flat part slide in its own plane) against the non-static fused
 points at s (static surfaces flush with a part, like a cabinet's front frame around a closed
@@ -41,7 +42,9 @@ ICP_COARSE_VOXELS = 4.0
 ICP_FINE_VOXELS = 1.5
 ICP_ITERATIONS = 20
 # ICP stops when an iteration moves the points by less than this share of a voxel.
-ICP_TOLERANCE_VOXELS = 0.01
+ICP_TOLERANCE_VOXELS = 0.05
+# The coarse ICP pass uses every n-th point (it only has to reach the fine basin).
+COARSE_SUBSAMPLE = 4
 # ICP and verification use at most this many of a proposal's points (a fixed random subset).
 MAX_TRACK_POINTS = 1500
 # A pose is accepted when at least this share of the proposal's tested points are consistent
@@ -182,15 +185,16 @@ class Tracker:
         return float(np.mean(cons > 0)), float(np.mean((viol > 0) & (cons == 0)))
 
     def _icp(self, points: np.ndarray, s: int, T0: np.ndarray) -> np.ndarray:
-        return icp(points, self.trees[s], self.targets[s], T0,
-                   (ICP_COARSE_VOXELS * self.voxel, ICP_FINE_VOXELS * self.voxel),
-                   tolerance=ICP_TOLERANCE_VOXELS * self.voxel)
+        """Coarse pass on every COARSE_SUBSAMPLE-th point, then the fine pass on all of them."""
+        tol = ICP_TOLERANCE_VOXELS * self.voxel
+        T = icp(points[::COARSE_SUBSAMPLE], self.trees[s], self.targets[s], T0, (ICP_COARSE_VOXELS * self.voxel,), tolerance=tol)
+        return icp(points, self.trees[s], self.targets[s], T, (ICP_FINE_VOXELS * self.voxel,), tolerance=tol)
 
     def solve_step(self, points: np.ndarray, s: int, guesses: list[np.ndarray]) -> np.ndarray | None:
         """Best verified (4, 4) world motion of (N, 3) reference points to step s, or None."""
         if self.trees[s] is None or len(self.targets[s]) < 3:
             return None
-        for cands in (guesses, None):
+        for cands in [[g] for g in guesses] + [None]:
             if cands is None:  # re-detection
                 cands = [T for cluster in self.moving_clusters(s) for T in pca_alignments(points, cluster)]
             best, best_score = None, -np.inf
@@ -216,8 +220,8 @@ class Tracker:
             s = ref + direction
             while 0 <= s < n:
                 guesses = [solved[-1]]
-                if len(solved) >= 2:
-                    guesses.append(solved[-1] @ np.linalg.inv(solved[-2]) @ solved[-1])
+                if len(solved) >= 2:  # constant velocity first, then the last pose
+                    guesses.insert(0, solved[-1] @ np.linalg.inv(solved[-2]) @ solved[-1])
                 T = self.solve_step(sample, s, guesses)
                 if T is not None:
                     Ts[s] = T
