@@ -99,7 +99,8 @@ def reconstruction_tables(reco: dict) -> str:
             zip(xs[k], sc[k].get("total", {}).get("time_s", []), sc[k].get("cpu", {}).get("time_s", []))]
     out.append("## Time per stage vs frames, views and joints (fitted log-log exponents: time ∝ x^p)\n\n"
                f"Frames and views swept on {size['sweep_category']} instance 0; joints: Table 1 cases grouped by their "
-               "number of movable joints (so the category changes with it).  `cpu`: process CPU time.\n\n"
+               "number of movable joints (so the category changes with it).  Only runs that found a movable joint "
+               "(so every stage ran) count.  `cpu`: process CPU time.\n\n"
                + _table(["stage"] + [f"p ({k}: {', '.join(map(str, xs[k]))})" for k in sc], srows) + "\n\n"
                + _table(["sweep", "x", "total wall [s]", "CPU [s]"], prow) + "\n")
 

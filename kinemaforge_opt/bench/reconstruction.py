@@ -336,8 +336,9 @@ def summarise(records: list[dict]) -> dict:
 
 def _stage_times(records: list[dict], key: str) -> dict:
     """Per stage of timing_s (and the process CPU time), mean time [s] per value of ``key`` over
-    the successful records and the fitted log-log exponent."""
-    ok = [r for r in records if r["ok"]]
+    the records that went through every stage (reconstructed, at least one movable joint found,
+    so the NLP and the verification ran) and the fitted log-log exponent."""
+    ok = [r for r in records if r["ok"] and any(t != "fixed" for _, _, t in r.get("estimated_joints", []))]
     xs = sorted({r[key] for r in ok})
     stages = list(dict.fromkeys(s for r in ok for s in r["timing_s"]))
     out = {}
