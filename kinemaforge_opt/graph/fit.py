@@ -13,6 +13,7 @@ noise around a static pose is rigid, not a prismatic joint of one noisy coordina
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,6 +53,8 @@ class JointHypothesis:
     the graph rescores it for correlated residuals (see ``graph.score``).
     confidence: ρ ∈ [0, 1], set by the graph (probability of this type for the pair times the
     fit's consistency with the noise level); 1.0 until scored.
+    rotation_rms: RMS rotation residual [rad] and rotation_sigma: the pair's estimated rotation
+    noise per coordinate [rad] (both 0 for position-only tracks).
     """
 
     type: str
@@ -71,6 +74,8 @@ class JointHypothesis:
     n_samples: int
     bic: float
     confidence: float = 1.0
+    rotation_rms: float = 0.0
+    rotation_sigma: float = 0.0
 
 
 def _tangent_basis(a: np.ndarray) -> np.ndarray:
@@ -249,13 +254,14 @@ def _fit_pose(kind: str, m: RelativeMotion) -> JointHypothesis:
     x, r = _solve(fun, x0, n_glob, x0.size - n_glob, 6)
     r = r.reshape(n, 6)
     pos_res = r[:, :3] * sp
+    rot = dict(rotation_rms=float(np.sqrt(np.mean(np.sum((r[:, 3:] * sr) ** 2, axis=1)))), rotation_sigma=float(sr))
     if kind == "rigid":
-        return _finish(kind, m, None, None, 0.0, None, np.zeros(n), r.ravel(), pos_res, k)
+        return dataclasses.replace(_finish(kind, m, None, None, 0.0, None, np.zeros(n), r.ravel(), pos_res, k), **rot)
     if kind == "prismatic":
         a = normalize(a0 + B @ x[3:5])
         axis, q = _orient(a, x[7:])
         origin = c + B @ x[5:7] + x[7] * a
-        return _finish(kind, m, axis, origin, 0.0, None, q, r.ravel(), pos_res, k)
+        return dataclasses.replace(_finish(kind, m, axis, origin, 0.0, None, q, r.ravel(), pos_res, k), **rot)
     a = normalize(a0 + B @ x[:2])
     cc = c0 + B @ x[2:4]
     h = x[10] if kind == "helical" else 0.0
@@ -263,7 +269,7 @@ def _fit_pose(kind: str, m: RelativeMotion) -> JointHypothesis:
     origin = cc + a * np.dot(ps[0] - cc, a)
     radius = float(np.linalg.norm((ps[0] - cc) - a * np.dot(ps[0] - cc, a)))
     # Flipping the axis negates the angle too, so the pitch h is unchanged.
-    return _finish(kind, m, axis, origin, h, radius, q, r.ravel(), pos_res, k)
+    return dataclasses.replace(_finish(kind, m, axis, origin, h, radius, q, r.ravel(), pos_res, k), **rot)
 
 
 # --------------------------------------------------------------------------- position only

@@ -11,7 +11,9 @@ White residuals at the sensor noise level give c = 1 and plain BIC.
 
 Identifiability: a richer model is a candidate only when each simpler model it would replace is
 clearly inadequate — that model's residual RMS exceeds SIGNIFICANCE (3, the usual 3σ level) times
-the richer model's, both floored at the white-noise level.  Otherwise the extra geometry (an arc's
+the richer model's, both floored at the white-noise level, in positions or (full-pose tracks)
+in rotations: a prismatic joint cannot explain a lid turning 80°, however small the lid's
+position residual.  Otherwise the extra geometry (an arc's
 sagitta, a helix's rise, a drawer's stroke) is not resolved by the data: a 6 m-radius "hinge"
 on a drawer's 2 mm wobble, or a helix on a door's out-of-plane jitter, or a prismatic joint on
 a static part's noise.
@@ -50,9 +52,14 @@ def score_pair(hyps: dict[str, JointHypothesis]) -> dict[str, JointHypothesis]:
     bic = {
         k: c * h.chi2 + (h.n_params + s * h.n_latent) * np.log(h.n_samples) for k, h in hyps.items()
     }
-    floor = np.sqrt(3.0) * next(iter(hyps.values())).noise_sigma
-    rms = {k: max(h.residual_rms, floor) for k, h in hyps.items()}
-    bic = {k: v for k, v in bic.items() if all(rms[j] > SIGNIFICANCE * rms[k] for j in SIMPLER[k])}
+    first = next(iter(hyps.values()))
+    rms = {k: max(h.residual_rms, np.sqrt(3.0) * first.noise_sigma) for k, h in hyps.items()}
+    rot = {k: max(h.rotation_rms, np.sqrt(3.0) * first.rotation_sigma) for k, h in hyps.items()}
+
+    def inadequate(j, k):  # simpler model j clearly misfits where k fits (positions or rotations)
+        return rms[j] > SIGNIFICANCE * rms[k] or (rot[k] > 0 and rot[j] > SIGNIFICANCE * rot[k])
+
+    bic = {k: v for k, v in bic.items() if all(inadequate(j, k) for j in SIMPLER[k])}
     log_w = log_posterior(bic)
     return {
         k: dataclasses.replace(h, bic=float(bic.get(k, np.inf)), confidence=float(np.exp(log_w.get(k, -np.inf))))

@@ -56,6 +56,8 @@ MAX_VIOLATED_SHARE = 0.1
 # larger; smaller clusters of moving points are speckle or a part's fringe).
 MIN_PART_AREA = 0.01
 MIN_PROPOSAL_POINTS = 20
+# A new proposal joins a tracked one when it moves with it at this share of common steps.
+COMOVING_SHARE = 0.8
 # Growing: rounds of CLUSTER_VOXELS each, and time steps compared per round.
 GROW_ROUNDS = 8
 GROW_STEPS = 10
@@ -268,14 +270,46 @@ class Tracker:
         return part
 
 
+def refine(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
+    """One more fine ICP pass per proposal and step, from its tracked pose, with the grown points
+    as source and the targets extended by every point on a tracked part: a part's strip along a
+    hinge is static by the free-space test at steps where the part rests, and without it the
+    trimmed ICP slides the part off its true pose toward the part's non-static remainder."""
+    fine = ICP_FINE_VOXELS * tracker.voxel
+    out = []
+    for s in range(len(tracker.clouds)):
+        pts = tracker.clouds[s].points
+        keep = tracker.status[s] != STATIC
+        for p in proposals:
+            moved = p.points_at(s)
+            if moved is not None:
+                keep |= cKDTree(moved).query(pts, distance_upper_bound=fine)[0] < np.inf
+        tracker.targets[s] = pts[keep]
+        tracker.trees[s] = cKDTree(pts[keep]) if keep.any() else None
+    rng = np.random.default_rng(0)
+    for p in proposals:
+        sample = p.points if len(p.points) <= MAX_TRACK_POINTS else p.points[rng.choice(len(p.points), MAX_TRACK_POINTS, replace=False)]
+        Ts = p.Ts_delta.copy()
+        for s in range(len(Ts)):
+            if s == p.ref or not np.all(np.isfinite(Ts[s])) or tracker.trees[s] is None:
+                continue
+            T = icp(sample, tracker.trees[s], tracker.targets[s], Ts[s], (fine,), tolerance=ICP_TOLERANCE_VOXELS * tracker.voxel)
+            cons, viol = tracker.verify(sample @ T[:3, :3].T + T[:3, 3], s)
+            if cons >= MIN_CONSISTENT_SHARE and viol <= MAX_VIOLATED_SHARE:
+                Ts[s] = T
+        out.append(Proposal(p.name, p.ref, p.points, Ts))
+    return out
+
+
 def propose_and_track(tracker: Tracker) -> list[Proposal]:
     """Proposals from the moving points of every time step (most moving points first): moving
-    points not yet explained by a tracked proposal (within ICP_FINE_VOXELS voxels of its moved
-    points) are clustered into new proposals of at least ``tracker.min_points`` points, and each
-    is tracked through the sequence."""
+    points not yet explained by a tracked proposal (within the coarse ICP radius of its moved
+    points: closer leftovers are the part's own fringe, seen through a small track error) are
+    clustered into new proposals of at least ``tracker.min_points`` points, and each is tracked
+    through the sequence; then every track is refined (:func:`refine`)."""
     order = np.argsort([-np.sum(s == MOVING) for s in tracker.status], kind="stable")
     proposals: list[Proposal] = []
-    radius = ICP_FINE_VOXELS * tracker.voxel
+    radius = ICP_COARSE_VOXELS * tracker.voxel
     for r in order:
         moving = tracker.clouds[r].points[tracker.status[r] == MOVING]
         if len(moving) < tracker.min_points:
@@ -289,5 +323,38 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
         if len(rest) < tracker.min_points:
             continue
         for idx in clusters(rest, tracker.voxel, tracker.min_points):
-            proposals.append(tracker.track(f"p{len(proposals)}", int(r), rest[idx]))
-    return proposals
+            new = tracker.track(f"p{len(proposals)}", int(r), rest[idx])
+            k = _comoving(new, proposals, ICP_COARSE_VOXELS * tracker.voxel)
+            if k is None:
+                proposals.append(new)
+            else:  # a disconnected piece of a tracked part (a drawer's floor behind its front)
+                p = proposals[k]
+                T = np.linalg.inv(p.Ts_delta[new.ref])
+                proposals[k] = Proposal(p.name, p.ref, np.concatenate([p.points, new.points @ T[:3, :3].T + T[:3, 3]]), p.Ts_delta)
+    return refine(tracker, proposals) if proposals else proposals
+
+
+def _comoving(new: Proposal, proposals: list[Proposal], tolerance: float) -> int | None:
+    """Index of the tracked proposal that ``new`` moves rigidly with, or None: its points, carried
+    by that proposal's motion instead of their own, land within ``tolerance`` [m] (RMS) of their
+    own track at COMOVING_SHARE of the steps both observe (a new track may fail at a few steps
+    where its piece is hidden)."""
+    best, best_share = None, 0.0
+    for k, p in enumerate(proposals):
+        T_ref = p.Ts_delta[new.ref]
+        if not np.all(np.isfinite(T_ref)):
+            continue
+        x = new.points
+        agree, both = 0, 0
+        for s in range(len(new.Ts_delta)):
+            if not (np.all(np.isfinite(new.Ts_delta[s])) and np.all(np.isfinite(p.Ts_delta[s]))):
+                continue
+            both += 1
+            D = p.Ts_delta[s] @ np.linalg.inv(T_ref)  # p's motion from new.ref to s
+            a = x @ new.Ts_delta[s][:3, :3].T + new.Ts_delta[s][:3, 3]
+            b = x @ D[:3, :3].T + D[:3, 3]
+            agree += np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))) <= tolerance
+        share = agree / max(both, 1)
+        if share >= COMOVING_SHARE and share > best_share:
+            best, best_share = k, share
+    return best
