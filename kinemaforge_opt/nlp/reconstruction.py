@@ -48,7 +48,7 @@ from ..model import ArticulatedModel, JointDynamics, JointLimits
 from ..physics.effects import EFFECTS
 from ..symbolic import build_dynamics
 from .problem import Problem, Result
-from .visual import Correspondences, SurfaceModel, correspond, fixed_subsample, pseudo_huber, robust_value, z_vector
+from .visual import Correspondences, SurfaceModel, correspond, surface_model, fixed_subsample, pseudo_huber, robust_value, z_vector
 
 ENERGY_MODES = ("soft", "hard", "off")
 
@@ -66,7 +66,10 @@ class ScrewOptions:
     energy-balance residual per window.  energy_weight: multiplies the soft energy term.
     energy_window_s: energy window length [s].  fit_dynamics: free damping, Coulomb friction and
     an inertia ratio per moving link when forces are recorded.  max_iter: IPOPT iterations per
-    solve.  jit: compile the mapped functions (needs a C compiler).
+    solve.  jit: compile the mapped functions (needs a C compiler).  hessian: "exact" or "lbfgs".
+    expand: expand the dense stage to SX (see :func:`_solver_options`).  refuse: after the warm-up,
+    rebuild every surface model from all steps' observed points moved back to q = 0 by the
+    NLP's motion, and warm up again on it.
     """
 
     vis: bool = True
@@ -85,6 +88,7 @@ class ScrewOptions:
     max_iter: int = 200
     jit: bool = False
     hessian: str = "exact"
+    refuse: bool = False
     expand: bool = True
 
     def __post_init__(self):
@@ -648,6 +652,13 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             run(f"vis_warmup_{r + 1}", correspondences(data, state, size, delta=delta), dense=False)
             if delta == data.delta and _converged(before, state):
                 break
+        if options.refuse:
+            data = refused_surfaces(data, state)
+            for r in range(options.rounds):
+                before = (state.axes.copy(), state.origins.copy(), state.q.copy())
+                run(f"vis_refused_{r + 1}", correspondences(data, state, size), dense=False)
+                if _converged(before, state):
+                    break
         corr = correspondences(data, state, size)
     else:
         corr = correspondences(data, state, size) if options.vis else None
@@ -667,6 +678,19 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     return ScrewResult(model, state.q[cols], state, terms, int(sum(s["iterations"] for s in stages)),
                        all(s["success"] for s in stages), tuple(stages), time.perf_counter() - start,
                        identified, tuple(notes))
+
+
+def refused_surfaces(data: ScrewData, state: ScrewState) -> ScrewData:
+    """``data`` with every surface model rebuilt from the observed points of all steps moved back
+    to the zero configuration by the motion of ``state`` (spacing ``data.delta``)."""
+    model = state_model(data, state)
+    cols = np.searchsorted(state.t, data.times)
+    surfaces = {}
+    for link, obs in data.observed.items():
+        Ts = transforms_world0_t(model, link, state.q[cols])
+        back = [(pts - T[:3, 3]) @ T[:3, :3] for pts, T in zip(obs, Ts) if pts is not None and len(pts)]
+        surfaces[link] = surface_model(np.concatenate(back), data.delta, link) if back else data.surfaces[link]
+    return dataclasses.replace(data, surfaces=surfaces)
 
 
 def _converged(before, state: ScrewState, angle: float = 1e-4, distance: float = 1e-5) -> bool:

@@ -233,14 +233,20 @@ def pushed_links(per: Perception, labels: list[np.ndarray], wrenches, links: lis
 def screw_data(per: Perception, seq, model: ArticulatedModel, lines: dict[str, JointLine],
                clouds_world: dict[str, np.ndarray], labels: list[np.ndarray]) -> ScrewData:
     """The NLP's inputs from the perception and the closed-form model (see :class:`ScrewData`):
-    observed points per moving part and step, surface models at the zero configuration (fused
-    points, normals from local planes), the Huber width = the voxel edge (the spacing of the
+    observed points per moving part and step, surface models at the zero configuration (the zero
+    step's points, normals from local planes), the Huber width = the voxel edge (the spacing of the
     fused points, which bounds the point-to-plane misfit of a sampled surface) and the gate = two
     ICP inlier distances."""
     moving = [j.child for j in model.movable_joints]
     observed = {p: [c.points[lab == p] for c, lab in zip(per.clouds, labels)] for p in moving}
-    surfaces = {p: surface_model(clouds_world[p], per.voxel, p) for p in moving}
     q0 = np.column_stack([_filled(lines[j.name].q, per.times) for j in model.movable_joints]) if moving else np.zeros((per.times.size, 0))
+    # Surface models from the zero step's own points (at q = 0 by definition): the fused cloud was
+    # moved by the per-step tracks, whose errors blur it (on protocol_cabinet_0 the NLP on the
+    # fused surface stopped at 1.4° axis error, on the zero-step surface at 0.14°).  The NLP
+    # re-fuses every step with its own motion later (ScrewOptions.refuse).
+    s0 = int(np.argmin(np.abs(q0).sum(axis=1)))
+    surfaces = {p: surface_model(observed[p][s0] if len(observed[p][s0]) >= 50 else clouds_world[p], per.voxel, p)
+                for p in moving}
     w = seq.wrenches
     pushed = pushed_links(per, labels, w, moving) if w is not None else None
     if w is not None and not any(pushed):
@@ -301,7 +307,7 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
     doc = {
         "enabled": True, "terms": result.terms, "iterations": result.iterations, "success": result.success,
         "time_s": time.perf_counter() - t0, "identified": list(result.identified), "notes": list(result.notes),
-        "stages": [{k: v for k, v in st.items() if k in ("stage", "iterations", "success", "status", "time_s", "costs")}
+        "stages": [{k: v for k, v in st.items() if k in ("stage", "iterations", "success", "status", "time_s", "solve_s", "costs")}
                    for st in result.stages],
         "options": dataclasses.asdict(options),
         "closed_form": [_line_record(n, lines[n]) for n in lines],
