@@ -75,7 +75,7 @@ class RecoSize:
     budget_s: float | None = None
 
 
-RECO_QUICK = RecoSize("quick", CATEGORIES, (0,), (0,), views=2, frames=12, width=160, height=120,
+RECO_QUICK = RecoSize("quick", CATEGORIES, (0, 1), (0,), views=4, frames=12, width=160, height=120,
                       ablation_categories=("microwave",), ablation_instances=(0,),
                       views_sweep=(1, 2, 4), frames_sweep=(8, 12, 16), energy_weights=(0.1, 1.0, 10.0),
                       budget_s=300.0)
@@ -201,6 +201,14 @@ def resolve_options(options: dict) -> tuple[dict | None, str | None]:
 
         kwargs[screw_param] = ScrewOptions(**screw)
     return kwargs, None
+
+
+def default_option(name: str):
+    """The default value of ``reconstruct_sequence``'s keyword ``name`` (None if it has none)."""
+    from ..perception import reconstruct_sequence
+
+    p = inspect.signature(reconstruct_sequence).parameters.get(name)
+    return None if p is None or p.default is inspect.Parameter.empty else p.default
 
 
 def option_support(options: dict) -> str | None:
@@ -392,7 +400,9 @@ def run_reconstruction(size: RecoSize, out_dir: str | Path, cache: Path | None =
     energy = {"available": why is None, "reason": why, "points": []}
     if why is None:
         for w in size.energy_weights:
-            energy["points"].append({"energy_weight": w, **summarise([runs(c, {ENERGY_WEIGHT_OPTION: w}) for c in abl_cases])})
+            # the default weight is the "full" run itself
+            opts = {} if w == default_option(ENERGY_WEIGHT_OPTION) else {ENERGY_WEIGHT_OPTION: w}
+            energy["points"].append({"energy_weight": w, **summarise([runs(c, opts) for c in abl_cases])})
     sweep = dict(base)
     views_recs = [runs(protocol_case(size.sweep_category, 0, 0, **{**sweep, "views": v})) for v in size.views_sweep]
     frames_recs = [runs(protocol_case(size.sweep_category, 0, 0, **{**sweep, "frames": f})) for f in size.frames_sweep]

@@ -13,8 +13,9 @@ sizes:
   --quick   each concealed effect alone on the door and the drawer plus the null cases, one
             noise seed, one demo-door seed, calibrate scaling at 30/60/120 Hz, the robot-arm
             side-by-side (nominal vs IDIM-LS vs kinemaforge_opt) on a 6 s excitation; RGB-D
-            reconstruction (Table 1, Table 2, drift, sensitivity, time per stage) on one
-            instance per category at 2 views x 12 steps, 160x120 px
+            reconstruction (Table 1, Table 2, drift, sensitivity, time per stage) on two
+            instances per category at 4 views x 12 steps, 160x120 px (a 300 s budget:
+            runs past it are listed as skipped)
   (full)    adds the effect pairs, three noise seeds, three demo-door seeds, scaling up to
             400 Hz, a 20 s arm excitation; reconstruction on the seed protocol (8 views x 20
             steps at 640x480, 2 instances x 2 seeds per category, every category ablated);
