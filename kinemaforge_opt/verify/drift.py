@@ -115,7 +115,8 @@ def fit_initial_velocity(
 ) -> np.ndarray:
     """(n,) the initial velocity whose Drake replay best matches the recorded q over the first
     ``window_s`` seconds (at least 3 samples), by Gauss-Newton on finite-difference sensitivities
-    (one replay per joint and iteration), started from the finite-difference estimate.
+    (one replay per joint and iteration), started from the finite-difference estimate and kept
+    within twice the largest finite-difference speed of each joint.
 
     Why: at a visual rate (~10 Hz) the first finite difference of q is a poor velocity (a door
     pushed from rest shows ~0.5 rad/s), and the replay's drift would mostly measure that."""
@@ -126,6 +127,9 @@ def fit_initial_velocity(
     t_fit, q_fit = t_rec[:k], rec.q[:k]
     v = recorded_velocity(rec)[0].copy()
     scale = np.maximum(np.abs(np.diff(rec.q[:k], axis=0)).max(axis=0) / max(t_fit[-1], 1e-9), 1e-3)
+    # the answer stays within the speeds the recording shows (a joint pinned on a stop is
+    # insensitive to v0, and an unbounded step would run off there)
+    bound = 2.0 * np.abs(recorded_velocity(rec)).max(axis=0) + scale
 
     def residual(v0):
         return (simulate_at(model, rec.q[0], v0, t_fit, forcing, discrete).q - q_fit)[1:].ravel()
@@ -138,7 +142,8 @@ def fit_initial_velocity(
             dv[j] = 1e-3 * scale[j]
             J[:, j] = (residual(v + dv) - r) / dv[j]
         step = np.linalg.lstsq(J, -r, rcond=None)[0]
-        v_new = v + step
+        v_new = np.clip(v + step, -bound, bound)
+        step = v_new - v
         r_new = residual(v_new)
         if r_new @ r_new >= r @ r:
             break
