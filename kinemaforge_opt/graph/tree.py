@@ -30,7 +30,7 @@ from networkx.algorithms.tree.branchings import ArborescenceIterator
 from ..errors import DataError
 from ..io.tracks import PoseTracks
 from .fit import JointHypothesis, fit_all
-from .motion import WORLD, relative_motion
+from .motion import MIN_SAMPLES, WORLD, relative_motion
 from .score import SIGNIFICANCE, log_posterior, score_pair
 
 # A pair is merged into one rigid part when the rigid type is at least this probable (a 95 %
@@ -82,6 +82,7 @@ class GraphResult:
 def _pair_fits(tracks: PoseTracks) -> dict[tuple[str, str], dict[str, JointHypothesis]]:
     """Scored fits for every allowed ordered pair (parent, child); indices None = world."""
     names = (WORLD,) + tracks.names
+    obs = tracks.observed()
     out = {}
     for i, parent in enumerate(names):
         if i > 0 and not tracks.has_orientation:
@@ -89,6 +90,9 @@ def _pair_fits(tracks: PoseTracks) -> dict[tuple[str, str], dict[str, JointHypot
         for j, child in enumerate(names[1:], start=1):
             if i == j:
                 continue
+            both = obs[j - 1] if i == 0 else obs[j - 1] & obs[i - 1]
+            if both.sum() < MIN_SAMPLES:
+                continue  # too few common samples to tell any relation: no edge
             motion = relative_motion(tracks, None if i == 0 else i - 1, j - 1)
             out[(parent, child)] = score_pair(fit_all(motion))
     return out
@@ -211,6 +215,19 @@ def _greedy_tree(parts, edges) -> KinematicTree:
     return _tree("base", parts, edges, arcs)
 
 
+def _observed_tracks(tracks: PoseTracks) -> PoseTracks:
+    """The tracks observed at MIN_SAMPLES samples or more (fewer relate to nothing: a proposal
+    seen at a few steps only); DataError when none is."""
+    keep = tracks.observed().sum(axis=1) >= MIN_SAMPLES
+    if not keep.any():
+        raise DataError(f"no track is observed at {MIN_SAMPLES} samples or more (tracks: {', '.join(tracks.names)}); "
+                        "a joint cannot be fitted")
+    if keep.all():
+        return tracks
+    R = tracks.Rs_world_track[keep] if tracks.has_orientation else None
+    return PoseTracks(tracks.times, tuple(n for n, k in zip(tracks.names, keep) if k), tracks.positions[keep], R)
+
+
 def infer_tree(tracks: PoseTracks, method: str = "graph", k_best: int = 3) -> GraphResult:
     """Tracks -> kinematic tree (see module doc).  ``method``: 'graph' (constraint graph +
     arborescence, k_best alternatives) or 'greedy' (ablation, one tree).
@@ -218,6 +235,7 @@ def infer_tree(tracks: PoseTracks, method: str = "graph", k_best: int = 3) -> Gr
     Raises DataError when no track moves relative to the world (nothing to infer)."""
     if method not in ("graph", "greedy"):
         raise ValueError(f"method must be 'graph' or 'greedy', got {method!r}")
+    tracks = _observed_tracks(tracks)
     fits = _pair_fits(tracks)
     parts = _merge(tracks, fits)
     if len(parts) == 1:

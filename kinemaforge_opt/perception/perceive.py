@@ -14,6 +14,7 @@ from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from ..errors import DataError
+from ..graph.motion import MIN_SAMPLES
 from ..io.sequence import Sequence
 from ..io.tracks import PoseTracks
 from .change import MOVING, STATIC, motion_status, pixel_status
@@ -145,6 +146,9 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
     t0 = stage("motion", t0)
     tracker = Tracker(clouds, status, seq.cameras, noise, voxel)
     proposals = propose_and_track(tracker)
+    # a proposal seen at fewer steps than any joint fit needs relates to nothing: left out
+    need = min(MIN_SAMPLES, times.size)
+    proposals = [p for p in proposals if np.isfinite(p.Ts_delta[:, 0, 0]).sum() >= need]
     if not proposals:
         raise DataError(
             f"{seq.root}: no motion — no group of points moved between time steps beyond the depth "
