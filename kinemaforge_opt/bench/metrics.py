@@ -62,24 +62,39 @@ def part_iou(pred: Sequence[Hashable], true: Sequence[Hashable], pred_ignore: It
     t = np.asarray(true, dtype=object)
     if p.shape != t.shape or p.ndim != 1:
         raise DataError(f"part IoU needs two label arrays of the same length, got shapes {p.shape} and {t.shape}")
+    pred_names = list(dict.fromkeys(p.tolist()))
+    true_names = list(dict.fromkeys(t.tolist()))
+    pi = np.array([pred_names.index(x) for x in p.tolist()], dtype=np.int64)
+    ti = np.array([true_names.index(x) for x in t.tolist()], dtype=np.int64)
+    counts = np.bincount(pi * len(true_names) + ti, minlength=len(pred_names) * len(true_names))
+    return part_iou_from_counts(counts.reshape(len(pred_names), len(true_names)), pred_names, true_names,
+                                pred_ignore, true_ignore)
+
+
+def part_iou_from_counts(counts: np.ndarray, pred_names: Sequence[Hashable], true_names: Sequence[Hashable],
+                         pred_ignore: Iterable[Hashable] = (), true_ignore: Iterable[Hashable] = ()) -> PartMatch:
+    """:func:`part_iou` from the confusion matrix: ``counts[i, j]`` samples labelled
+    ``pred_names[i]`` and ``true_names[j]`` (every label, the ignored ones included, so unions
+    are complete).  Use it to accumulate large labelings (millions of pixels) frame by frame."""
+    C = np.asarray(counts, dtype=np.int64)
+    if C.shape != (len(pred_names), len(true_names)):
+        raise DataError(f"confusion counts of shape {C.shape} do not match {len(pred_names)} predicted and "
+                        f"{len(true_names)} true labels")
     pi, ti = set(pred_ignore), set(true_ignore)
-    pred_parts = [x for x in dict.fromkeys(p.tolist()) if x not in pi]
-    true_parts = [x for x in dict.fromkeys(t.tolist()) if x not in ti]
-    if not true_parts:
+    rows = [i for i, x in enumerate(pred_names) if x not in pi]
+    cols = [j for j, x in enumerate(true_names) if x not in ti and C[:, j].sum() > 0]
+    if not cols:
         raise DataError("part IoU: the true labels hold no part (all samples ignored)")
-    P = np.array([p == x for x in pred_parts], dtype=bool).reshape(len(pred_parts), -1)
-    T = np.array([t == x for x in true_parts], dtype=bool).reshape(len(true_parts), -1)
-    inter = P.astype(np.int64) @ T.T.astype(np.int64)  # (n_pred, n_true)
-    union = P.sum(1)[:, None] + T.sum(1)[None, :] - inter
+    inter = C[np.ix_(rows, cols)].astype(float)
+    union = C.sum(1)[rows][:, None] + C.sum(0)[cols][None, :] - inter
     iou = np.where(union > 0, inter / np.maximum(union, 1), 0.0)
-    pred_to_true, per_true = {}, {x: 0.0 for x in true_parts}
-    if pred_parts:
-        rows, cols = linear_sum_assignment(-iou)
-        for r, c in zip(rows, cols):
+    pred_to_true, per_true = {}, {true_names[j]: 0.0 for j in cols}
+    if rows:
+        for r, c in zip(*linear_sum_assignment(-iou)):
             if iou[r, c] > 0:
-                pred_to_true[pred_parts[r]] = true_parts[c]
-                per_true[true_parts[c]] = float(iou[r, c])
-    return PartMatch(float(np.mean(list(per_true.values()))), per_true, pred_to_true, int(p.size))
+                pred_to_true[pred_names[rows[r]]] = true_names[cols[c]]
+                per_true[true_names[cols[c]]] = float(iou[r, c])
+    return PartMatch(float(np.mean(list(per_true.values()))), per_true, pred_to_true, int(C.sum()))
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .metrics import JointRecord, loglog_exponent, match_joints, mean_std, part_iou, topology_correct
+from .metrics import JointRecord, loglog_exponent, match_joints, mean_std, part_iou_from_counts, topology_correct
 
 # The seed paper's Table 1 average row (its protocol: 5 categories, RGB-D, 8 views).
 SEED_TABLE1 = {"axis_error_deg": 2.83, "origin_error_m": 0.024, "part_iou": 0.910, "drift_1s_m": 0.041,
@@ -147,20 +147,33 @@ def true_joints(case_root: Path) -> list[JointRecord]:
     return out
 
 
-def true_pixel_labels(case_root: Path, seq, frames: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
-    """Frame index -> (N,) true part names at the (N, 2) (row, column) pixels given per frame,
-    read from ground_truth/labels/<camera>/<index:06d>.png and its legend in case.json."""
+def label_confusion(case_root: Path, seq, pred: dict[int, tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, list, list]:
+    """Confusion counts of predicted against true pixel labels over every frame.
+
+    pred: frame index -> ((N, 2) (row, column) pixels, (N,) predicted part names).  The true label
+    of each pixel is read from ground_truth/labels/<camera>/<index:06d>.png (legend in case.json).
+    Returns (counts (P, L), P predicted names, L true names); accumulated frame by frame, so a
+    full-size sequence (tens of millions of pixels) needs no more memory than one frame."""
     import cv2
 
     legend = json.loads((case_root / "ground_truth" / "case.json").read_text())["label_legend"]
-    lut = np.array([legend.get(str(i), "nothing") for i in range(256)], dtype=object)
+    true_names = [legend.get(str(i), "nothing") for i in range(256)]
     by_index = {f.index: f for f in seq.frames}
-    out = {}
-    for idx, pix in frames.items():
+    rows: dict = {}  # predicted name -> (256,) counts per true label code
+    for idx, (pix, names) in pred.items():
         f = by_index[idx]
         img = cv2.imread(str(case_root / "ground_truth" / "labels" / f.camera / f"{idx:06d}.png"), cv2.IMREAD_UNCHANGED)
-        out[idx] = lut[img[pix[:, 0], pix[:, 1]]]
-    return out
+        codes = img[pix[:, 0], pix[:, 1]]
+        for name in dict.fromkeys(names.tolist()):
+            rows[name] = rows.get(name, 0) + np.bincount(codes[names == name], minlength=256)
+    pred_names = list(rows)
+    counts = np.array([rows[n] for n in pred_names], dtype=np.int64).reshape(len(pred_names), 256)
+    used = [j for j in range(256) if counts[:, j].any()]
+    merged = list(dict.fromkeys(true_names[j] for j in used))  # one column per name
+    C = np.zeros((len(pred_names), len(merged)), dtype=np.int64)
+    for j in used:
+        C[:, merged.index(true_names[j])] += counts[:, j]
+    return C, pred_names, merged
 
 
 # --- one reconstruction, scored ----------------------------------------------------------------
@@ -256,11 +269,9 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
     rec.update(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0, ok=True)
 
     seq = load_sequence(case_root / "sequence")
-    pred = pixel_labels(r.perception, r.labels)
-    truth = true_pixel_labels(case_root, seq, {i: p for i, (p, _) in pred.items()})
-    idx = sorted(pred)
-    m = part_iou(np.concatenate([pred[i][1] for i in idx]), np.concatenate([truth[i] for i in idx]),
-                 pred_ignore=(ENVIRONMENT,), true_ignore=("nothing", "environment"))
+    counts, pred_names, true_names = label_confusion(case_root, seq, pixel_labels(r.perception, r.labels))
+    m = part_iou_from_counts(counts, pred_names, true_names, pred_ignore=(ENVIRONMENT,),
+                             true_ignore=("nothing", "environment"))
     est = [JointRecord(j["name"], j["type"], j["parent"], j["child"], np.asarray(j["axis_world"], float),
                        np.asarray(j["origin_world"], float)) for j in doc["joints"]]
     scores = match_joints(est, obj_joints, m.pred_to_true)

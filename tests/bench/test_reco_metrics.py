@@ -12,6 +12,7 @@ from kinemaforge_opt.bench.metrics import (
     mean_std,
     origin_error_m,
     part_iou,
+    part_iou_from_counts,
     topology_correct,
 )
 from kinemaforge_opt.errors import DataError
@@ -73,6 +74,14 @@ def test_part_iou_unmatched_true_part_scores_zero_and_spill_counts():
     m = part_iou(pred, true, true_ignore=("floor",))
     assert m.iou == {"body": pytest.approx(0.4), "door": 0.0} or m.iou == {"body": 0.0, "door": pytest.approx(0.4)}
     assert m.mean_iou == pytest.approx(0.2)
+
+
+def test_part_iou_from_counts_matches_the_hand_count_and_checks_shapes():
+    # the hand-counted case above as a confusion matrix: rows A, B, env; columns door, body
+    m = part_iou_from_counts(np.array([[4, 1], [0, 4], [0, 1]]), ["A", "B", "env"], ["door", "body"], pred_ignore=("env",))
+    assert m.iou == {"door": pytest.approx(4 / 5), "body": pytest.approx(4 / 6)} and m.n_pixels == 10
+    with pytest.raises(DataError, match="do not match 2 predicted and 2 true"):
+        part_iou_from_counts(np.zeros((3, 2)), ["A", "B"], ["door", "body"])
 
 
 def test_part_iou_refuses_mismatched_lengths():
