@@ -327,6 +327,10 @@ class _Runs:
             slug = "-".join(f"{k}={v}" for k, v in sorted(options.items())) or "full"
             self.say(f"reconstruct {case.name} ({slug})")
             self.memo[key] = evaluate_case(case, root, self.out / case_key(case) / slug, options)
+            # one line per finished run, so an interrupted long run still leaves its measurements
+            self.out.mkdir(parents=True, exist_ok=True)
+            with open(self.out / "records.jsonl", "a", encoding="utf-8") as f:
+                f.write(json.dumps(self.memo[key], default=str) + "\n")
         return self.memo[key]
 
 
