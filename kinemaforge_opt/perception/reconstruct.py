@@ -141,10 +141,11 @@ def closed_form_lines(per: Perception, graph: GraphResult) -> dict[str, JointLin
 
 
 def build_model(per: Perception, graph: GraphResult, density: float, name: str = "reconstruction",
-                lines: dict[str, JointLine] | None = None):
+                lines: dict[str, JointLine] | None = None, labels: list[np.ndarray] | None = None):
     """Kinematic tree + fused points -> (ArticulatedModel, joint records, part clouds at zero,
     meshes, point labels).  Joint records follow the reconstruction.json contract.  ``lines``:
-    the joints as world lines (default: :func:`closed_form_lines`, the graph's closed form)."""
+    the joints as world lines (default: :func:`closed_form_lines`, the graph's closed form).
+    ``labels``: :func:`point_labels` when already computed (they do not depend on ``lines``)."""
     tracks, tree = per.tracks, graph.best
     lines = closed_form_lines(per, graph) if lines is None else lines
     part_of = {m: p for p, members in tree.parts.items() for m in members if m in tracks.names}
@@ -173,7 +174,7 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
             "confidence": float(h.confidence), "residual_rms_m": float(h.residual_rms),
             **({"radius": float(h.radius)} if h.radius is not None else {}),
         })
-    labels = point_labels(per, part_of)
+    labels = point_labels(per, part_of) if labels is None else labels
     # every point of every time step, moved to the zero configuration and into its link frame
     T_link_world = {}
     for p, k in reps.items():
@@ -300,13 +301,14 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
         return model, records, clouds_world, meshes, labels, None
     t0 = time.perf_counter()
     data = screw_data(per, seq, model, lines, clouds_world, labels)
+    prepare_s = time.perf_counter() - t0
     result = refine_screws(data, options)
     new_lines = refined_lines(result, per, lines)
-    model, records, clouds_world, meshes, labels = build_model(per, graph, density, name, new_lines)
+    model, records, clouds_world, meshes, labels = build_model(per, graph, density, name, new_lines, labels)
     model = _apply_identified(model, records, result)
     doc = {
         "enabled": True, "terms": result.terms, "iterations": result.iterations, "success": result.success,
-        "time_s": time.perf_counter() - t0, "identified": list(result.identified), "notes": list(result.notes),
+        "time_s": prepare_s + result.time_s, "prepare_s": prepare_s, "solve_s": result.time_s, "identified": list(result.identified), "notes": list(result.notes),
         "stages": [{k: v for k, v in st.items() if k in ("stage", "iterations", "success", "status", "time_s", "solve_s", "costs")}
                    for st in result.stages],
         "options": dataclasses.asdict(options),
