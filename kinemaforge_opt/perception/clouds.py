@@ -178,7 +178,8 @@ def pixel_stride(voxel: float, foot: float) -> int:
 
 def downsample(points: np.ndarray, voxel: float, outliers: bool = False) -> np.ndarray:
     """(N, 3) points [m] -> (M, 3) centroids of the points in each occupied voxel of edge
-    ``voxel`` [m] (as open3d's ``voxel_down_sample``, in numpy: several times faster here);
+    ``voxel`` [m], cells at integer multiples of the edge (what open3d's ``voxel_down_sample``
+    does up to its grid offset; in numpy, several times faster on a busy host);
     with ``outliers``, centroids with fewer than OUTLIER_MIN_NEIGHBOURS others within
     OUTLIER_RADIUS_VOXELS voxels are dropped (isolated speckle)."""
     if len(points) == 0:
