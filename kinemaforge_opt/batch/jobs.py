@@ -51,4 +51,22 @@ def calibrate_job(input_dir: str | Path, out_dir: str | Path) -> dict:
     return {"converged": cal.success, "estimates": {k: e.value.tolist() for k, e in cal.estimates.items()}}
 
 
-JOBS = {"diagnose": diagnose_job, "calibrate": calibrate_job}
+def reconstruct_job(input_dir: str | Path, out_dir: str | Path) -> dict:
+    """``kinemaforge reconstruct`` on an RGB-D sequence folder (``sequence.json`` inside) into
+    ``out_dir``, then the Drake verification of the reconstruction; returns the joints and the
+    drift per horizon [m]."""
+    from ..perception.reconstruct import reconstruct_sequence
+    from ..verify.reconstruction import verify_reconstruction
+
+    seq = Path(input_dir)
+    if not (seq / "sequence.json").is_file():
+        raise InputFileError(f"batch input {str(seq)!r} is not an RGB-D sequence (no sequence.json)")
+    rec = reconstruct_sequence(seq, out_dir, show_progress=False)
+    joints = [f"{j['name']}:{j['type']} {j['parent']}->{j['child']}" for j in rec.document["joints"]]
+    if not rec.model.movable_joints:
+        return {"joints": joints, "drift_m": None}
+    v = verify_reconstruction(out_dir, seq, reconstruction=rec)
+    return {"joints": joints, "drift_m": v["drift_m"], "energy_residual": v["energy_residual"]}
+
+
+JOBS = {"diagnose": diagnose_job, "calibrate": calibrate_job, "reconstruct": reconstruct_job}

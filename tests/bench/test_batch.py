@@ -34,3 +34,16 @@ def test_corrupt_input_is_reported_and_others_finish_then_skipped(tmp_path):
     again = run_batch(inputs, out, _double, workers=2, progress=False)
     assert [it.status for it in again] == ["skipped", "ok", "skipped"]
     assert again[0].result == {"y": 2.0}
+
+
+def test_job_inputs_that_are_not_what_the_job_reads_are_named(tmp_path):
+    import pytest
+
+    from kinemaforge_opt.batch.jobs import JOBS
+    from kinemaforge_opt.errors import InputFileError
+
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputFileError, match="empty.*no sequence.json"):
+        JOBS["reconstruct"](tmp_path / "empty", tmp_path / "out")
+    with pytest.raises(InputFileError, match="empty.*has no model.urdf"):
+        JOBS["diagnose"](tmp_path / "empty", tmp_path / "out")
