@@ -19,10 +19,13 @@ proposal is unobserved at s (NaN: occluded or out of view), and the next step st
 last solved pose.
 
 Growing: a moving part's points near a hinge move less than the free-space test can resolve
-(τ ≈ 3√2 σ_z), so the moving cluster misses a strip along the axis.  After tracking, points of
-the reference cloud next to the proposal are added when the track explains them better than the
-static hypothesis: moved along the track they land on an observed surface (within the fine ICP
-radius) at more time steps than they do left in place.
+(τ ≈ 3√2 σ_z), so the moving cluster misses a strip along the axis; a drawer's inside is never
+seen through (it hides in the body), so it is never moving.  After tracking, points of the
+reference cloud next to the proposal are added when the track explains them better than the
+static hypothesis: over the GROW_STEPS steps where the part moved most, (times they land on an
+observed surface, within the fine ICP radius) − (times the cameras saw through them) is larger
+moved along the track than left in place, and the track puts them in seen-through space at no
+more than a quarter of those steps.
 """
 
 from __future__ import annotations
@@ -174,6 +177,17 @@ class Tracker:
             self._moving_clusters[s] = [moving[i] for i in clusters(moving, self.voxel, self.min_points)]
         return self._moving_clusters[s]
 
+    def violated(self, points: np.ndarray, s: int) -> np.ndarray:
+        """(N,) int 1 where the images at step s saw through the world point and none confirmed it."""
+        cons = np.zeros(len(points), dtype=bool)
+        viol = np.zeros(len(points), dtype=bool)
+        for view, window in zip(self.clouds[s].views, self.windows(s)):
+            cam = view.camera or self.cameras[view.frame.camera]
+            v = free_space_test(points, cam, view.frame.T_world_camera, window, self.noise)
+            cons |= v > 0
+            viol |= v < 0
+        return (viol & ~cons).astype(int)
+
     def verify(self, points: np.ndarray, s: int) -> tuple[float, float]:
         """(consistent share, violated share) of (N, 3) world points against the images at step
         s: the share of points some image confirms, and of points only seen through."""
@@ -255,14 +269,18 @@ class Tracker:
                 break
             tested[cand] = True
             x = cloud[cand]
-            part_hits = np.zeros(cand.size, dtype=int)
-            static_hits = np.zeros(cand.size, dtype=int)
+            part_score = np.zeros(cand.size, dtype=int)  # hits minus violations, per hypothesis
+            static_score = np.zeros(cand.size, dtype=int)
+            part_viol = np.zeros(cand.size, dtype=int)
             for s in steps:
                 T = Ts[s]
                 tree = self.full_tree(s)
-                part_hits += tree.query(x @ T[:3, :3].T + T[:3, 3], distance_upper_bound=fine)[0] < np.inf
-                static_hits += tree.query(x, distance_upper_bound=fine)[0] < np.inf
-            take = (part_hits > static_hits) & (2 * part_hits >= len(steps))
+                xs = x @ T[:3, :3].T + T[:3, 3]
+                vp, vs = self.violated(xs, s), self.violated(x, s)
+                part_score += (tree.query(xs, distance_upper_bound=fine)[0] < np.inf).astype(int) - vp
+                static_score += (tree.query(x, distance_upper_bound=fine)[0] < np.inf).astype(int) - vs
+                part_viol += vp
+            take = ((part_score > static_score) & (4 * part_viol <= len(steps))) | ((part_score == static_score) & (part_viol == 0))
             if not take.any():
                 break
             in_part[cand[take]] = True
