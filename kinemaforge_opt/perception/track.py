@@ -22,10 +22,12 @@ Growing: a moving part's points near a hinge move less than the free-space test 
 (τ ≈ 3√2 σ_z), so the moving cluster misses a strip along the axis; a drawer's inside is never
 seen through (it hides in the body), so it is never moving.  After tracking, points of the
 reference cloud next to the proposal are added when the track explains them better than the
-static hypothesis: over the GROW_STEPS steps where the part moved most, (times they land on an
-observed surface, within the fine ICP radius) − (times the cameras saw through them) is larger
-moved along the track than left in place, and the track puts them in seen-through space at no
-more than a quarter of those steps.
+static hypothesis: over the GROW_STEPS steps where the part moved most, counting only steps where
+the moved point is observable (not occluded, in view), (times they land on an observed surface,
+within the fine ICP radius) − (times the cameras saw through them) is larger moved along the
+track than left in place, and the track puts them in seen-through space at no more than a
+quarter of those steps; a tie with no such step also joins (a surface sliding along itself — a
+drawer's floor — looks the same under both hypotheses; only seen-through space tells them apart).
 """
 
 from __future__ import annotations
@@ -177,8 +179,9 @@ class Tracker:
             self._moving_clusters[s] = [moving[i] for i in clusters(moving, self.voxel, self.min_points)]
         return self._moving_clusters[s]
 
-    def violated(self, points: np.ndarray, s: int) -> np.ndarray:
-        """(N,) int 1 where the images at step s saw through the world point and none confirmed it."""
+    def verdicts(self, points: np.ndarray, s: int) -> tuple[np.ndarray, np.ndarray]:
+        """(N,) int each: 1 where some image at step s confirms the world point (consistent), and
+        1 where an image saw through it and none confirmed it (violated)."""
         cons = np.zeros(len(points), dtype=bool)
         viol = np.zeros(len(points), dtype=bool)
         for view, window in zip(self.clouds[s].views, self.windows(s)):
@@ -186,7 +189,7 @@ class Tracker:
             v = free_space_test(points, cam, view.frame.T_world_camera, window, self.noise)
             cons |= v > 0
             viol |= v < 0
-        return (viol & ~cons).astype(int)
+        return cons.astype(int), (viol & ~cons).astype(int)
 
     def verify(self, points: np.ndarray, s: int) -> tuple[float, float]:
         """(consistent share, violated share) of (N, 3) world points against the images at step
@@ -276,10 +279,12 @@ class Tracker:
                 T = Ts[s]
                 tree = self.full_tree(s)
                 xs = x @ T[:3, :3].T + T[:3, 3]
-                vp, vs = self.violated(xs, s), self.violated(x, s)
-                part_score += (tree.query(xs, distance_upper_bound=fine)[0] < np.inf).astype(int) - vp
-                static_score += (tree.query(x, distance_upper_bound=fine)[0] < np.inf).astype(int) - vs
-                part_viol += vp
+                cons_p, viol_p = self.verdicts(xs, s)
+                seen = cons_p | viol_p  # compare only where the moved point can be observed
+                vs = self.verdicts(x, s)[1]
+                part_score += seen * ((tree.query(xs, distance_upper_bound=fine)[0] < np.inf).astype(int) - viol_p)
+                static_score += seen * ((tree.query(x, distance_upper_bound=fine)[0] < np.inf).astype(int) - vs)
+                part_viol += viol_p
             take = ((part_score > static_score) & (4 * part_viol <= len(steps))) | ((part_score == static_score) & (part_viol == 0))
             if not take.any():
                 break
