@@ -86,7 +86,8 @@ def reconstruction_tables(reco: dict) -> str:
         etxt = _table(["energy weight", "cases"] + [h for _, h, _ in COLUMNS],
                       [_metric_row(f"{p['energy_weight']:g}", p) for p in e["points"]])
     vrows = [_metric_row(str(p["views"]), p) + [f"{p['mean_wall_s']:.1f}"] for p in reco["sensitivity"]["views"]]
-    out.append("## Sensitivity to the energy weight\n\n" + etxt + "\n\n"
+    on = f" (instance 0 of {', '.join(e['categories'])})" if e.get("categories") else ""
+    out.append(f"## Sensitivity to the energy weight{on}\n\n" + etxt + "\n\n"
                f"## Sensitivity to the number of views ({size['sweep_category']} instance 0)\n\n"
                + _table(["views", "cases"] + [h for _, h, _ in COLUMNS] + ["wall time [s]"], vrows) + "\n")
 

@@ -54,8 +54,8 @@ class RecoSize:
     Table 2 case set, ablation_categories × ablation_instances (repetition seed 0; each variant
     on every case).  views_sweep / frames_sweep: numbers of views
     and frames for the sensitivity and scaling sweeps (on ``sweep_category`` instance 0, other
-    sizes as table1).  energy_weights: values of the energy-weight option (sweep on the ablation
-    cases).  budget_s: wall-time budget [s] of the part; runs not started once it is spent are
+    sizes as table1).  energy_weights: values of the energy-weight option, swept on instance 0 of
+    ``energy_categories`` (default: the ablation categories).  budget_s: wall-time budget [s] of the part; runs not started once it is spent are
     recorded as skipped (in the order Table 1, Table 2, energy weight, views, frames)."""
 
     name: str
@@ -73,15 +73,16 @@ class RecoSize:
     energy_weights: tuple[float, ...]
     sweep_category: str = "microwave"
     budget_s: float | None = None
+    energy_categories: tuple[str, ...] | None = None
 
 
 RECO_QUICK = RecoSize("quick", CATEGORIES, (0, 1), (0,), views=4, frames=12, width=160, height=120,
-                      ablation_categories=("microwave",), ablation_instances=(0,),
+                      ablation_categories=("cabinet",), ablation_instances=(0,),
                       views_sweep=(1, 2, 4), frames_sweep=(8, 12, 16), energy_weights=(0.1, 1.0, 10.0),
-                      budget_s=300.0)
+                      budget_s=300.0, energy_categories=("microwave",))
 RECO_FULL = RecoSize("full", CATEGORIES, (0, 1), (0, 1), views=8, frames=20, width=640, height=480,
                      ablation_categories=CATEGORIES, ablation_instances=(0,),
-                     views_sweep=(2, 4, 8), frames_sweep=(10, 20, 40), energy_weights=(0.0, 0.1, 1.0, 10.0, 100.0))
+                     views_sweep=(2, 4, 8), frames_sweep=(10, 20, 40), energy_weights=(0.1, 1.0, 10.0, 100.0))
 
 
 # --- synthetic cases, cached on disk ------------------------------------------------------------
@@ -412,12 +413,13 @@ def run_reconstruction(size: RecoSize, out_dir: str | Path, cache: Path | None =
 
     # sensitivity: energy weight (on the ablation cases) and number of views (on the sweep case)
     why = option_support({ENERGY_WEIGHT_OPTION: 1.0})
-    energy = {"available": why is None, "reason": why, "points": []}
+    energy_cases = [protocol_case(c, 0, 0, **base) for c in size.energy_categories or size.ablation_categories]
+    energy = {"available": why is None, "reason": why, "points": [], "categories": [c.category for c in energy_cases]}
     if why is None:
         for w in size.energy_weights:
             # the default weight is the "full" run itself
             opts = {} if w == default_option(ENERGY_WEIGHT_OPTION) else {ENERGY_WEIGHT_OPTION: w}
-            energy["points"].append({"energy_weight": w, **summarise([runs(c, opts) for c in abl_cases])})
+            energy["points"].append({"energy_weight": w, **summarise([runs(c, opts) for c in energy_cases])})
     sweep = dict(base)
     views_recs = [runs(protocol_case(size.sweep_category, 0, 0, **{**sweep, "views": v})) for v in size.views_sweep]
     frames_recs = [runs(protocol_case(size.sweep_category, 0, 0, **{**sweep, "frames": f})) for f in size.frames_sweep]

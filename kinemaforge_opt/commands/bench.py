@@ -14,8 +14,8 @@ sizes:
             noise seed, one demo-door seed, calibrate scaling at 30/60/120 Hz, the robot-arm
             side-by-side (nominal vs IDIM-LS vs kinemaforge_opt) on a 6 s excitation; RGB-D
             reconstruction (Table 1, Table 2, drift, sensitivity, time per stage) on two
-            instances per category at 4 views x 12 steps, 160x120 px (a 300 s budget:
-            runs past it are listed as skipped)
+            instances per category at 4 views x 12 steps, 160x120 px, ablations on a
+            cabinet (a 300 s budget: runs past it are listed as skipped)
   (full)    adds the effect pairs, three noise seeds, three demo-door seeds, scaling up to
             400 Hz, a 20 s arm excitation; reconstruction on the seed protocol (8 views x 20
             steps at 640x480, 2 instances x 2 seeds per category, every category ablated);
