@@ -128,6 +128,17 @@ def test_time_budget_skips_new_runs_and_tables_leave_them_out(tmp_path):
     assert (s["cases"], s["failed"], s["skipped"]) == (0, 0, 1)
 
 
+def test_stage_times_fit_the_exponent_over_complete_runs():
+    def rec(x, t, found=True):
+        return {"ok": True, "frames": x, "cpu_s": t, "timing_s": {"total": t, "graph": 0.1 * x},
+                "estimated_joints": [["base", "p0", "revolute" if found else "fixed"]]}
+
+    recs = [rec(10, 2.0), rec(20, 8.0), rec(40, 32.0), rec(80, 0.5, found=False)]  # t ∝ frames²
+    st = R._stage_times(recs, "frames")
+    assert st["total"]["x"] == [10, 20, 40] and st["total"]["exponent"] == pytest.approx(2.0)
+    assert st["graph"]["exponent"] == pytest.approx(1.0)
+
+
 def test_option_support_names_missing_options():
     assert R.option_support({"method": "greedy"}) is None
     assert "no_such_switch" in R.option_support({"no_such_switch": False})
