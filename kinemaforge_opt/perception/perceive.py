@@ -14,7 +14,7 @@ from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from ..errors import DataError
-from ..graph.motion import MIN_SAMPLES
+from ..graph.motion import MIN_SAMPLES, noise_sigma
 from ..io.sequence import Sequence
 from ..io.tracks import PoseTracks
 from .change import MOVING, STATIC, motion_status, pixel_status
@@ -60,6 +60,15 @@ def _tracks(proposals: list[Proposal], times: np.ndarray) -> PoseTracks:
         P[k] = p.Ts_delta[:, :3, :3] @ c + p.Ts_delta[:, :3, 3]
         R[k] = p.Ts_delta[:, :3, :3]
     return PoseTracks(times, tuple(p.name for p in proposals), P, R)
+
+
+def _jitter(p: Proposal) -> float:
+    """Noise σ per coordinate [m] of a proposal's centroid track over its observed steps
+    (graph.motion.noise_sigma: robust spread about a local quadratic)."""
+    ok = np.isfinite(p.Ts_delta[:, 0, 0])
+    c = p.points.mean(axis=0)
+    path = p.Ts_delta[ok, :3, :3] @ c + p.Ts_delta[ok, :3, 3]
+    return noise_sigma(path)
 
 
 def static_cameras(seq: Sequence, times: np.ndarray) -> bool:
@@ -149,6 +158,8 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
     # a proposal seen at fewer steps than any joint fit needs relates to nothing: left out
     need = min(MIN_SAMPLES, times.size)
     proposals = [p for p in proposals if np.isfinite(p.Ts_delta[:, 0, 0]).sum() >= need]
+    # a track whose jitter exceeds the fine ICP radius jumps between surfaces: it follows no part
+    proposals = [p for p in proposals if _jitter(p) <= ICP_FINE_VOXELS * voxel]
     if not proposals:
         raise DataError(
             f"{seq.root}: no motion — no group of points moved between time steps beyond the depth "
