@@ -174,8 +174,10 @@ class ScrewProblem:
 class ScrewResult:
     """The refined estimate.  model: the model with refined axes, origins, pitches, limits (observed
     range of q), and damping / Coulomb friction / scaled inertia where identified.  q: (T, n) at the
-    observed steps.  terms: name -> value of each active term at the end (unweighted sums, see
-    module doc), None for a term switched off.  iterations: IPOPT iterations over all stages.
+    observed steps.  terms: name -> value of each term at the end, None for a term switched off:
+    ``vis`` the robust sum Σ ρ_δ(r)/δ² over the final correspondences, ``dyn`` the robust sum of
+    normalised defects, ``energy`` the soft penalty (× energy_weight) or, for the hard constraint,
+    Σ (relative residual)² over the windows.  iterations: IPOPT iterations over all stages.
     success: every stage converged.  stages: per stage (name, iterations, success, seconds).
     identified: which dynamic quantities were fitted.  notes: why a term was off."""
 
@@ -602,9 +604,9 @@ def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
         spline, v_s, a_s = _rates(sp.data.times, st.q[cols])
         for k, j in enumerate(joints):
             fs = _force_scale(sp.data, j, v_s[k], a_s[k])
-            if f"damping:{j.name}" in vals:
-                damping[k] = float(vals[f"damping:{j.name}"][0]) * fs / v_s[k]
-                coulomb[k] = float(vals[f"coulomb:{j.name}"][0]) * fs
+            if f"damping:{j.name}" in vals:  # IPOPT may relax the bound 0 by ~1e-8: clip
+                damping[k] = max(float(vals[f"damping:{j.name}"][0]) * fs / v_s[k], 0.0)
+                coulomb[k] = max(float(vals[f"coulomb:{j.name}"][0]) * fs, 0.0)
     return ScrewState(axes, origins, pitches, st.t.copy(), q, v, damping, coulomb, ratio)
 
 

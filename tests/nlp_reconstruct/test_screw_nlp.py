@@ -163,3 +163,15 @@ def test_vis_off_without_forces_has_nothing_to_fit():
     r = refine_screws(data, ScrewOptions(dyn=True))  # dyn requested but no wrenches: noted, vis only
     assert r.terms["dyn"] is None and any("no recorded forces" in n for n in r.notes)
     assert state_model(data, r.state).joint("hinge").limits.upper == pytest.approx(0.2, abs=1e-3)
+
+
+def test_helical_pitch_is_recovered():
+    true = door_model(AXIS, ORIGIN, kind="helical", pitch=0.05)
+    init = door_model(TILT @ AXIS, ORIGIN + [0.005, 0.0, 0.0], kind="helical", pitch=0.03)
+    times = np.linspace(0.0, 1.0, 6)
+    q = 0.8 * times
+    data = exact_data(true, init, times, q, q + 0.02)
+    r = refine_screws(data, ScrewOptions(dyn=False))
+    j = r.model.joint("hinge")
+    assert j.pitch == pytest.approx(0.05, abs=1e-3)
+    assert _errors(r.model)[0] < 0.1
