@@ -15,7 +15,9 @@ Decision variables (names as in the :class:`~kinemaforge_opt.nlp.problem.Problem
 Named costs (each reported at the optimum; any can be switched off):
 
 - ``vis``: Σ pseudo-Huber point-to-plane residuals of every moving part's observed points against
-  its surface model moved by the bridge's ``link_poses`` (:mod:`.visual`), divided by δ²;
+  its surface model moved by the bridge's ``link_poses`` (:mod:`.visual`), divided by δ²; inside
+  one solve its IRLS quadratic (a (13, 13) moment matrix per part and step), the weights and the
+  correspondences refreshed between solves;
 - ``dyn``: compressed Hermite–Simpson defects of (q̇ = v, v̇ = ABA(q, v, τ_applied + τ_passive, θ))
   (the same transcription as :mod:`.joint_space`), each row divided by h × its typical rate
   and by ``dyn_sigma``, under a pseudo-Huber loss (robust to unmodelled contacts);
@@ -27,7 +29,11 @@ Named costs (each reported at the optimum; any can be switched off):
 
 The objective is the sum of the terms divided by the number of visual residuals.  Every
 per-step function is ``casadi.Function.map``-ped over the time steps, so the graph stays small and
-``jit`` is an option.  Coarse-to-fine (:func:`refine_screws`): closed-form init → ``vis`` warm-up
+``jit`` is an option (it works, but compiling each stage costs more than it saves here).  The
+dense stage is expanded to SX for IPOPT's exact Hessian: on protocol_cabinet_0 (2 doors, 77 grid
+points) building that Hessian is ~5 s CPU of the stage, the solve ~1–3 s; L-BFGS did not converge
+there.  Assembling the Hessian from per-interval blocks (as ``physics.search`` does) is the way to
+cut the build.  Coarse-to-fine (:func:`refine_screws`): closed-form init → ``vis`` warm-up
 on the frame grid with correspondences refreshed between solves → full objective on the dense
 grid.
 """
@@ -44,7 +50,7 @@ from scipy.interpolate import CubicSpline
 
 from ..errors import DataError, KinemaforgeError
 from ..io.sequence import Wrenches
-from ..model import ArticulatedModel, JointDynamics, JointLimits
+from ..model import ArticulatedModel, JointLimits
 from ..physics.effects import EFFECTS
 from ..symbolic import build_dynamics
 from .problem import Problem, Result
