@@ -12,6 +12,7 @@ COLUMNS = (
     ("axis_error_deg", "axis error [deg]", ".2f"),
     ("origin_error_m", "origin error [m]", ".3f"),
     ("part_iou", "part IoU", ".3f"),
+    ("moving_part_iou", "moving-part IoU", ".3f"),
     ("drift_1s_m", "1-s drift [m]", ".3f"),
     ("drift_50s_m", "50-s drift [m]", ".3f"),
     ("energy_residual", "energy residual", ".3f"),
@@ -56,7 +57,8 @@ def reconstruction_tables(reco: dict) -> str:
                 "estimated and true axis, sign-agnostic; origin error: distance between the estimated and true "
                 "joint lines (revolute only); joints found: share of the true movable joints matched by a "
                 "movable estimate; part IoU: per-pixel labels vs ground truth, parts matched by the "
-                "Hungarian method, mean over the object's true parts; joints are matched through the part "
+                "Hungarian method, mean over the object's true parts (moving-part IoU: over the parts a joint moves, "
+                "without the static body, whose IoU suffers from any background left unlabelled as environment); joints are matched through the part "
                 "matching (then by geometry); a true joint with no movable estimate counts as wrong type and is "
                 "left out of the axis/origin means; a failed reconstruction counts 0 in joints found, type and "
                 "topology and is left out of the other columns.  Drift, energy residual: the Drake verification of "

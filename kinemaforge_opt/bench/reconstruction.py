@@ -281,7 +281,8 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
     ver = doc.get("verification") or {}
     drift = {str(k): float(v) for k, v in (ver.get("drift_m") or {}).items() if v is not None}
     rec.update(
-        part_iou=m.mean_iou, iou_per_part=m.iou, part_match=m.pred_to_true, labelled_pixels=m.n_pixels,
+        part_iou=m.mean_iou, iou_per_part=m.iou,
+        moving_part_iou=_mean_or_none([m.iou.get(j.child, 0.0) for j in obj_joints if j.type != "fixed"]), part_match=m.pred_to_true, labelled_pixels=m.n_pixels,
         axis_error_deg=_mean_or_none(ax), origin_error_m=_mean_or_none(org),
         missed_joints=sum(s.est_joint is None for s in scores),
         joints_found=float(np.mean([s.est_joint is not None for s in scores])) if scores else None,
@@ -335,7 +336,7 @@ class _Runs:
         return self.memo[key]
 
 
-METRICS = ("axis_error_deg", "origin_error_m", "part_iou", "drift_1s_m", "drift_50s_m", "energy_residual",
+METRICS = ("axis_error_deg", "origin_error_m", "part_iou", "moving_part_iou", "drift_1s_m", "drift_50s_m", "energy_residual",
            "joints_found", "type_accuracy", "topology_correct")
 COUNT_FAILURES = ("joints_found", "type_accuracy", "topology_correct")
 
