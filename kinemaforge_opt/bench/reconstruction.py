@@ -52,11 +52,12 @@ class RecoSize:
 
     table1: categories × instances × seeds at (views, frames, width × height).  ablation_*: the
     Table 2 case set, ablation_categories × ablation_instances (repetition seed 0; each variant
-    on every case).  views_sweep / frames_sweep: numbers of views
-    and frames for the sensitivity and scaling sweeps (on ``sweep_category`` instance 0, other
-    sizes as table1).  energy_weights: values of the energy-weight option, swept on instance 0 of
-    ``energy_categories`` (default: the ablation categories).  budget_s: wall-time budget [s] of the part; runs not started once it is spent are
-    recorded as skipped (in the order Table 1, Table 2, energy weight, views, frames)."""
+    on every case).  views_sweep / frames_sweep: numbers of views and frames for the sensitivity
+    and scaling sweeps (on ``sweep_category`` instance 0, other sizes as table1).
+    energy_weights: values of the energy-weight option, swept on instance 0 of
+    ``energy_categories`` (default: the ablation categories).  budget_s: wall-time budget [s] of
+    the part; runs not started once it is spent are recorded as skipped (in the order Table 1,
+    Table 2, energy weight, views, frames)."""
 
     name: str
     categories: tuple[str, ...]
@@ -234,8 +235,9 @@ def option_support(options: dict) -> str | None:
 def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = None, verify: bool = True) -> dict:
     """Reconstruct ``case`` (generated at ``case_root``) into ``out_dir`` with the keyword
     ``options`` and score it.  With ``verify``, a reconstruction.json without "verification" is
-    verified in Drake as ``kinemaforge reconstruct`` does (its time is the "verify" stage).  A failing reconstruction is a record with ``ok`` False and its
-    error, never an exception.  Errors in degrees and metres; times in seconds."""
+    verified in Drake as ``kinemaforge reconstruct`` does (its time is the "verify" stage).  A
+    failing reconstruction is a record with ``ok`` False and its error, never an exception.
+    Errors in degrees and metres; times in seconds."""
     from ..io.sequence import load_sequence
     from ..perception import ENVIRONMENT, pixel_labels, reconstruct_sequence
 
@@ -282,7 +284,8 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
     drift = {str(k): float(v) for k, v in (ver.get("drift_m") or {}).items() if v is not None}
     rec.update(
         part_iou=m.mean_iou, iou_per_part=m.iou,
-        moving_part_iou=_mean_or_none([m.iou.get(j.child, 0.0) for j in obj_joints if j.type != "fixed"]), part_match=m.pred_to_true, labelled_pixels=m.n_pixels,
+        moving_part_iou=_mean_or_none([m.iou.get(j.child, 0.0) for j in obj_joints if j.type != "fixed"]),
+        part_match=m.pred_to_true, labelled_pixels=m.n_pixels,
         axis_error_deg=_mean_or_none(ax), origin_error_m=_mean_or_none(org),
         missed_joints=sum(s.est_joint is None for s in scores),
         joints_found=float(np.mean([s.est_joint is not None for s in scores])) if scores else None,
@@ -430,7 +433,8 @@ def run_reconstruction(size: RecoSize, out_dir: str | Path, cache: Path | None =
                "joints": _stage_times(t1, "n_joints")}
     return {
         "size": asdict(size), "seed_paper": SEED_TABLE1, "table1": table1, "table2": table2,
-        "table1_cases": [r["case"] for r in t1], "drift_vs_horizon": drift, "sensitivity": {"energy_weight": energy, "views": views},
+        "table1_cases": [r["case"] for r in t1], "drift_vs_horizon": drift,
+        "sensitivity": {"energy_weight": energy, "views": views},
         "scaling": scaling, "records": list(runs.memo.values()),
         "generation_s": runs.generation_s, "total_s": time.perf_counter() - t_start,
     }
