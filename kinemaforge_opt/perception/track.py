@@ -61,6 +61,8 @@ MAX_VIOLATED_SHARE = 0.1
 # larger; smaller clusters of moving points are speckle or a part's fringe).
 MIN_PART_AREA = 0.01
 MIN_PROPOSAL_POINTS = 20
+# ICP uses only the points confirmed by the images at the guess when they are at least this share.
+MIN_VISIBLE_SHARE = 0.2
 # A new proposal joins a tracked one when it moves with it at this share of common steps.
 COMOVING_SHARE = 0.8
 # Growing: rounds of CLUSTER_VOXELS each, and time steps compared per round.
@@ -218,7 +220,10 @@ class Tracker:
                 cands = [T for cluster in self.moving_clusters(s) for T in pca_alignments(points, cluster)]
             best, best_score = None, -np.inf
             for T0 in cands:
-                T = self._icp(points, s, T0)
+                # only the points the images confirm at the guess take part (a door's inner face,
+                # turned away near closed, would otherwise pull onto the body behind it)
+                seen = self.verdicts(points @ T0[:3, :3].T + T0[:3, 3], s)[0] > 0
+                T = self._icp(points[seen] if seen.sum() >= MIN_VISIBLE_SHARE * len(points) else points, s, T0)
                 cons, viol = self.verify(points @ T[:3, :3].T + T[:3, 3], s)
                 if cons - viol > best_score and cons >= MIN_CONSISTENT_SHARE and viol <= MAX_VIOLATED_SHARE:
                     best, best_score = T, cons - viol
