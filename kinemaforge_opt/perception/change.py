@@ -15,6 +15,11 @@ consistent tests is the signature of a noise outlier, ~0.1–0.5 % per test, whi
 *unknown* otherwise (e.g. a surface only uncovered at one time).  This works for moving
 cameras (every image carries its own pose) and finds the static background instead of
 assuming it.
+
+Fast path for static cameras (:func:`pixel_status`): the same test needs no reprojection — each
+reading is compared with the same pixel at every other time, and pixels whose readings all agree
+within τ (most of the background) are settled at once.  Moving cameras use
+:func:`motion_status` on the fused points against up to MAX_OTHER_STEPS other time steps.
 """
 
 from __future__ import annotations
