@@ -3,8 +3,8 @@
 ``perceive(seq)`` runs the stages on a loaded sequence and returns a :class:`Perception` whose
 ``tracks`` feed ``graph.infer_tree``; ``reconstruct_sequence(SEQ, OUT)`` is the whole RGB-D flow
 (URDF, meshes, reconstruction.json, clouds.npz).  Modules: ``clouds`` (back-projection, noise,
-fusion), ``change`` (free-space tests; per-pixel status for static cameras), ``segment`` (DBSCAN proposals, environment planes),
-``track`` (KD-tree ICP tracking, growth, merging), ``perceive`` (the stages in order),
+fusion), ``change`` (free-space tests; per-pixel status for static cameras), ``segment``
+(DBSCAN proposals, environment planes), ``track`` (KD-tree ICP tracking, growth, merging), ``perceive`` (the stages in order),
 ``surface`` (meshes, mass), ``reconstruct`` (the flow).
 """
 

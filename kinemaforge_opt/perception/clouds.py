@@ -206,7 +206,8 @@ def fuse(t: float, views: list[FrameCloud], voxel: float, coarse: float | None =
     """Fuse the views of one time step.  Returns the :class:`TimeCloud` and its (M,) int8 status.
 
     With per-pixel status in the views, points of each status are downsampled on their own
-    (moving and undecided ones at ``voxel`` without isolated points, static ones at ``coarse``); without it, everything is fused at ``voxel`` and the status is UNKNOWN."""
+    (moving and undecided ones at ``voxel`` without isolated points, static ones at ``coarse``);
+    without it, everything is fused at ``voxel`` and the status is UNKNOWN."""
     from .change import MOVING, STATIC, UNKNOWN
 
     pts = np.concatenate([v.points_world for v in views]) if views else np.zeros((0, 3))

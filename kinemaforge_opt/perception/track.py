@@ -10,7 +10,8 @@ refined by ICP (coarse radius ICP_COARSE_VOXELS, then fine radius ICP_FINE_VOXEL
 as point-to-plane would let a flat part slide in its own plane) against the non-static fused
 points at s (static surfaces flush with a part, like a cabinet's front frame around a closed
 door, would let it slide) — a part at rest where it is static (a closed drawer's front) finds
-few correspondences and keeps its guess, which the images then confirm — and then *verified* by the free-space tests of :mod:`change` against every depth image at s: the score is
+few correspondences and keeps its guess, which the images then confirm — and then *verified*
+by the free-space tests of :mod:`change` against every depth image at s: the score is
 the share of the proposal's points consistent with the images minus the share the images saw
 through.  A candidate is acceptable when its points are mostly consistent.  Only when both
 candidates fail are principal-axes alignments onto the moving clusters at s tried
