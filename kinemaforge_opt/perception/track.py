@@ -5,8 +5,8 @@ A proposal is a cluster of moving points at its reference time r.  Its motion Δ
 frame, ΔT(r) = I, so the track stays anchored to the reference) is solved outward from r, one
 time step at a time, from the constant-velocity extrapolation of the neighbouring solved poses
 (a door swinging fast between two samples) or, when that fails verification, the neighbouring
-pose itself.  Each candidate is
-refined by ICP (coarse radius ICP_COARSE_VOXELS, then fine radius ICP_FINE_VOXELS; point-to-point,
+pose itself.  Each candidate is refined by ICP — with only the points the images confirm at the
+guess, when there are enough (a part's far side would pull it onto what lies behind) — (coarse radius ICP_COARSE_VOXELS, then fine radius ICP_FINE_VOXELS; point-to-point,
 as point-to-plane would let a flat part slide in its own plane) against the non-static fused
 points at s (static surfaces flush with a part, like a cabinet's front frame around a closed
 door, would let it slide) — a part at rest where it is static (a closed drawer's front) finds
