@@ -624,7 +624,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     ``data.delta``; stops early once a round moves nothing) then the full objective on the dense
     grid (correspondences refreshed once more); without coarse-to-fine, one full solve with the
     correspondences of the closed form.  A stage that does not converge is recorded (``success``
-    False, IPOPT's status kept) and the next stage starts from its last iterate."""
+    False, IPOPT's status kept); its last iterate is kept (``accepted``) only if its robust visual
+    term is no worse than before the stage, else the next stage starts from the previous state."""
     options = options or ScrewOptions()
     start = time.perf_counter()
     state = initial_state(data)
@@ -642,9 +643,15 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         t0 = time.perf_counter()
         sp = build_screw_problem(data, opts, state, corr, dense)
         res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn))
+        accepted = False
         if np.isfinite(res.objective):
-            state = read_solution(sp, res)
+            candidate = read_solution(sp, res)
+            # an unconverged iterate is kept only if it fits the observed points no worse
+            accepted = res.success or not corr or vis_value(data, candidate, corr) <= vis_value(data, state, corr)
+            if accepted:
+                state = candidate
         stages.append({"stage": name, "iterations": res.iterations, "success": res.success, "status": res.status,
+                       "accepted": accepted,
                        "time_s": time.perf_counter() - t0, "solve_s": res.solve_time_s,
                        "eval_s": {k: round(float(v), 3) for k, v in res.stats.items() if k.startswith("t_wall_nlp")},
                        "costs": res.costs, "violations": res.violations, "n_vis": sp.n_vis,

@@ -309,7 +309,7 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
     doc = {
         "enabled": True, "terms": result.terms, "iterations": result.iterations, "success": result.success,
         "time_s": prepare_s + result.time_s, "prepare_s": prepare_s, "solve_s": result.time_s, "identified": list(result.identified), "notes": list(result.notes),
-        "stages": [{k: v for k, v in st.items() if k in ("stage", "iterations", "success", "status", "time_s", "solve_s", "costs")}
+        "stages": [{k: v for k, v in st.items() if k in ("stage", "iterations", "success", "accepted", "status", "time_s", "solve_s", "costs")}
                    for st in result.stages],
         "options": dataclasses.asdict(options),
         "closed_form": [_line_record(n, lines[n]) for n in lines],
