@@ -54,6 +54,7 @@ from ..model import ArticulatedModel, JointLimits
 from ..physics.effects import EFFECTS
 from ..symbolic import build_dynamics
 from .problem import Problem, Result
+from .structured_hessian import DenseTerms, lagrangian_hessian
 from .visual import Correspondences, SurfaceModel, correspond, surface_model, fixed_subsample, pseudo_huber, robust_value, z_vector
 
 ENERGY_MODES = ("soft", "hard", "off")
@@ -174,6 +175,7 @@ class ScrewProblem:
     free: tuple[str, ...]
     use_dyn: bool
     n_vis: int
+    hess_lag: ca.Function | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -454,6 +456,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         V = None
     terms = {}
     n_vis = 0
+    vis_blocks = []  # (per-step Function, frame columns, H blocks) for the structured Hessian
 
     # --- vis -----------------------------------------------------------------------------------
     jit = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O1"]}} if options.jit else {}
@@ -468,6 +471,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
                                [0.5 * ca.mtimes([zv.T, Hs, zv]) / data.delta**2], jit)
             mapped = step.map(len(items))
             vals = mapped(Q[:, frame_cols.tolist()], theta_mx, np.hstack([c.H for c in items]))
+            vis_blocks.append((step, frame_cols, np.hstack([c.H for c in items])))
             total = total + ca.sum2(vals)
             n_vis += int(sum(c.weights.sum() for c in items))
         terms["vis"] = total
@@ -549,7 +553,17 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
     if not prob.terms["costs"]:
         raise KinemaforgeError("the screw NLP has no active term: enable 'vis' (with observed points) or 'dyn'")
     new_state = dataclasses.replace(state, t=t_grid, q=q0, v=v0 if use_dyn else None)
-    return ScrewProblem(prob, data, options, new_state, frame_cols, dyn, tuple(free), use_dyn, n_vis)
+    hess_lag = None
+    if use_dyn and options.hessian == "exact":
+        pnames = [name for name in prob.terms["variables"] if name != "x"]
+        theta_phi = ca.Function("theta_phi", [prob._vars[name].symbol for name in pnames], [theta_mx, phi_mx])
+        hess_lag = lagrangian_hessian(DenseTerms(
+            prob, n, G, theta_phi, point, interval, energy if use_energy else None, (P, F, S), (Pm, Fm, Sm),
+            np.diff(t_grid), vis_blocks, 1.0 / norm, options.energy if use_energy else "off",
+            edges if use_energy else [], e_scale if use_energy else 1.0,
+            options.energy_weight / options.energy_sigma**2,
+            [(f"axis:{j.name}", f"unit_axis:{j.name}") for j in joints]))
+    return ScrewProblem(prob, data, options, new_state, frame_cols, dyn, tuple(free), use_dyn, n_vis, hess_lag)
 
 
 def _force_scale(data: ScrewData, joint, v_s: float, a_s: float) -> float:
@@ -570,13 +584,15 @@ def _energy_scale(model: ArticulatedModel, dyn, q: np.ndarray, v: np.ndarray) ->
     return float(max(np.ptp(E), 1e-9))
 
 
-def _solver_options(options: ScrewOptions, dense: bool) -> dict:
+def _solver_options(options: ScrewOptions, dense: bool, hess_lag: ca.Function | None = None) -> dict:
     """IPOPT options.  With the dynamics, the mapped MX graph is expanded to SX unless JIT is on:
     the exact Hessian of the mapped ABA intervals evaluated through MX cost ~1 s per iteration
     on the test door, the expanded one a few ms (building it costs ~1 s once)."""
     out = {"ipopt.acceptable_tol": 1e-5}
     if options.hessian == "lbfgs":
         out["ipopt.hessian_approximation"] = "limited-memory"
+    if hess_lag is not None:
+        out["hess_lag"] = hess_lag
     if dense and options.expand and not options.jit:
         out["expand"] = True
     return out
@@ -642,7 +658,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         nonlocal state
         t0 = time.perf_counter()
         sp = build_screw_problem(data, opts, state, corr, dense)
-        res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn))
+        res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn, sp.hess_lag))
         accepted = False
         if np.isfinite(res.objective):
             candidate = read_solution(sp, res)
