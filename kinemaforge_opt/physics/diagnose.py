@@ -223,8 +223,67 @@ def linear_init(model: ArticulatedModel, joint: str, effect: str, start: Trial, 
     first = EFFECTS[effect].params[0]
     value = coef[0] if EFFECTS[effect].lower[0] == -np.inf else max(coef[0], 0.0)
     out[f"{joint}.{first}"] = np.array([value])
-    if effect == "spring" and coef[0] > 0:
-        out[f"{joint}.spring_rest"] = np.array([coef[1] / coef[0]])
+    if effect == "spring" and coef[0] > 0:  # rest from the two coefficients, within a span of the motion
+        lo, hi = float(q[:, k].min()), float(q[:, k].max())
+        out[f"{joint}.spring_rest"] = np.array([np.clip(coef[1] / coef[0], 2 * lo - hi, 2 * hi - lo)])
+    return out
+
+
+def _id_force(model: ArticulatedModel, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Rigid-body inverse dynamics M(q) a + h(q, v) of ``model`` (T, n) [N·m or N]."""
+    import pinocchio as pin
+
+    from ..model.pinocchio import build_pin_model
+
+    pm = build_pin_model(model)
+    pd = pm.createData()
+    return np.array([pin.rnea(pm, pd, qq, vv, aa) for qq, vv, aa in zip(q, v, a)])
+
+
+def _columns(model: ArticulatedModel, joint: str, effect: str, q: np.ndarray, v: np.ndarray, id_force: np.ndarray,
+             eps: np.ndarray, v_scale: np.ndarray, stops: dict) -> list[np.ndarray]:
+    """Force columns (each (T,)) of ``effect`` on ``joint`` for the linear pre-screen: the effect's
+    force per unit parameter (Stribeck at a fifth of the RMS speed), the rigid-body force M a + h
+    for an inertia ratio, gravity's sin q and cos q for a revolute axis tilt (a constant for a
+    prismatic one), a one-sided ramp from the stop guess for a limit contact."""
+    k = model.joint_index(joint)
+    qk, vk = q[:, k], v[:, k]
+    vs = 0.2 * v_scale[k]
+    side, stop = stops[joint]
+    span = float(np.ptp(qk))
+    if effect == "axis_tilt":
+        return [np.ones_like(qk)] if model.joint(joint).type == "prismatic" else [np.sin(qk), np.cos(qk)]
+    return {
+        "viscous_damping": [-vk], "coulomb_friction": [-np.tanh(vk / eps[k])], "quadratic_drag": [-vk * np.abs(vk)],
+        "constant_bias": [np.ones_like(vk)], "spring": [-qk, np.ones_like(qk)],
+        "stribeck_friction": [-np.exp(-((vk / vs) ** 2)) * np.tanh(vk / eps[k])],
+        "inertia_error": [id_force[:, k]],
+        "limit_contact": [np.maximum(side * (qk - (stop - side * 0.05 * span)), 0.0)],
+    }[effect]
+
+
+def screen_scores(model: ArticulatedModel, pending: list[tuple[str, str]], selected: list[tuple[str, str]],
+                  r_nom: np.ndarray, id_force: np.ndarray, q: np.ndarray, v: np.ndarray, eps: np.ndarray,
+                  v_scale: np.ndarray, stops: dict) -> dict[tuple[str, str], float]:
+    """Per hypothesis, the share of the nominal inverse-dynamics residual on its joint (moving
+    samples) that the already selected effects on that joint leave and the hypothesis removes
+    too, by joint linear least squares on their force columns (:func:`_columns`); lower = explains
+    more.  A cheap ranking, not evidence: the chosen hypotheses are then fitted by the NLP."""
+    out = {}
+    for joint, effect in pending:
+        k = model.joint_index(joint)
+        moving = np.abs(v[:, k]) > 0.05 * v_scale[k]
+        rk = r_nom[moving, k]
+        base = [c[moving] for j, e in selected if j == joint for c in _columns(model, j, e, q, v, id_force, eps, v_scale, stops)]
+
+        def left(cols):
+            if not cols:
+                return float(np.sum(rk**2))
+            A = np.stack(cols, axis=1)
+            return float(np.sum((rk - A @ np.linalg.lstsq(A, rk, rcond=None)[0]) ** 2))
+
+        new = [c[moving] for c in _columns(model, joint, effect, q, v, id_force, eps, v_scale, stops)]
+        out[(joint, effect)] = left(base + new) / max(left(base), 1e-300)
     return out
 
 
@@ -274,6 +333,11 @@ def _at_bound_values(trial: Trial, names: list[str], nominal_z: dict) -> bool:
         stop = trial.values[name][0]
         at_edge = min(abs(stop - lo), abs(stop - hi)) <= 1e-6 * max(1.0, abs(stop))
         return bool(abs(trial.z[names[1]][0]) <= 1e-6 or at_edge)
+    if name.endswith(".stribeck"):  # a speed scale pinned at the top of its identifiable range is Coulomb friction
+        lo, hi = (trial.bounds or {}).get(names[1], (-np.inf, np.inf))
+        vs = trial.values[names[1]][0]
+        if abs(vs - hi) <= 1e-3 * abs(hi):
+            return True
     if name.endswith((".axis", ".inertia_ratio", ".spring_rest", ".bias")):
         return False
     return bool(abs(trial.z[name][0]) <= 1e-6 and abs(nominal_z[name][0]) <= 1e-6)
@@ -316,6 +380,7 @@ def diagnose(
     progress=None,
     segment_s: float | None = None,
     other_recordings: tuple[Recording, ...] = (),
+    screen: int | None = None,
 ) -> Diagnosis:
     """Locate, explain, model and show the mismatch between ``model`` and ``recording``.
 
@@ -325,7 +390,9 @@ def diagnose(
     segment_s: fit in segments of this length [s] (see ``nlp.joint_space``), and predict held-out
     data segment by segment from each segment's first state; use it for long oscillating
     recordings.  other_recordings: further recordings of the same system, used only to compare
-    predictions before vs after (``Diagnosis.held_out_others``).
+    predictions before vs after (``Diagnosis.held_out_others``).  screen: per selection round,
+    fit only this many hypotheses by NLP, those that best reduce the inverse-dynamics residual
+    in a linear least-squares pre-screen (None: fit every hypothesis).
     """
     say = progress or (lambda s: None)
     rec = match_recording(model, recording)
@@ -360,7 +427,8 @@ def diagnose(
     mismatch = locate(model, fit_rec, nominal.q_fit, sigma_q)
     v_scale = np.sqrt(np.mean(velocity_estimate(fit_rec) ** 2, axis=0))
 
-    r_nom, q_s, v_s, _ = inverse_dynamics_residual(model, fit_rec)  # the missing generalised force
+    r_nom, q_s, v_s, a_s = inverse_dynamics_residual(model, fit_rec)  # the missing generalised force
+    id_force = _id_force(model, q_s, v_s, a_s)
     eps = friction_smoothing(fit_rec)
 
     def trial_of(selected_: list[tuple[str, str]], start: Trial) -> Trial:
@@ -368,13 +436,18 @@ def diagnose(
         init, bounds, coefficient = {}, {}, {}
         for j, e in selected_:
             k = model.joint_index(j)
-            if all(n in start.free for n in _free_for(model, j, e)):
-                continue  # carried over from the parent fit
-            lin = linear_init(model, j, e, start, r_nom, q_s, v_s, eps, v_scale)
-            first = _free_for(model, j, e)[0]
-            init.update({n: x for n, x in lin.items() if n != first})
-            if first in lin:
-                coefficient[first] = lin[first]
+            carried = all(n in start.free for n in _free_for(model, j, e))  # values from the parent fit
+            if not carried:
+                lin = linear_init(model, j, e, start, r_nom, q_s, v_s, eps, v_scale)
+                first = _free_for(model, j, e)[0]
+                init.update({n: x for n, x in lin.items() if n != first})
+                if first in lin:
+                    coefficient[first] = lin[first]
+            if e == "stribeck_friction":
+                # A Stribeck excess is static friction that fades with speed: identifiable only if
+                # it fades within the recorded speeds (else it is Coulomb friction by another name).
+                b = fit_for([(j, e)]).blocks[f"{j}.v_stribeck"]
+                bounds[f"{j}.v_stribeck"] = (float(b.lower[0]), 0.5 * float(np.max(np.abs(v_s[:, k]))))
             if e == "limit_contact":  # start in contact, 5 % of the range before the extreme, with a stiffness
                 # whose force over that penetration is the recording's force scale
                 span = float(np.ptp(fit_rec.q[:, k]))
@@ -383,6 +456,8 @@ def diagnose(
                 # beyond all the data is just a spring).
                 lo, hi = float(fit_rec.q[:, k].min()), float(fit_rec.q[:, k].max())
                 bounds[f"{j}.limit_stop"] = (lo + 0.5 * span, hi) if stops[j][0] > 0 else (lo, hi - 0.5 * span)
+                if carried:
+                    continue
                 init[f"{j}.limit_stop"] = np.array([stops[j][1] - stops[j][0] * 0.05 * span])
                 init[f"{j}.limit_stiffness"] = fit_for([(j, e)]).blocks[f"{j}.limit_stiffness"].scale * 0.01 * float(np.std(fit_rec.q[:, k])) / (0.05 * span)
         contact = STATES_FROM_DATA or selected_[-1][1] == "limit_contact"  # a stop acts where the data went, not the parent fit
@@ -405,19 +480,22 @@ def diagnose(
     for _ in range(max_effects):
         rss0 = _rss_q(current.q_fit, fit_rec.q, sigma_q)
         rows = []
-        for joint in model.joint_names:
-            for effect in candidates:
-                if any(s[:2] == (joint, effect) for s in selected):
-                    continue
-                say(f"testing {effect} on {joint}")
-                trial = trial_of([s[:2] for s in selected] + [(joint, effect)], current)
-                names = _free_for(model, joint, effect)
-                size = float(np.sqrt(np.mean(((trial.q_fit - current.q_fit) / sigma_q) ** 2)))
-                supported = trial.success and not _at_bound_values(trial, names, nominal_z)
-                rows.append({"joint": joint, "type": effect, "trial": trial, "k": _n_params(names),
-                             "value": _reported_value(model, joint, effect, trial.values),
-                             "rss": _rss_q(trial.q_fit, fit_rec.q, sigma_q), "effect_size_sigma": size,
-                             "supported": supported})
+        pending = [(j, e) for j in model.joint_names for e in candidates if not any(s[:2] == (j, e) for s in selected)]
+        if screen is not None and len(pending) > screen:
+            # Linear pre-screen: the inverse-dynamics residual of the current model is linear
+            # in most effect parameters; only the hypotheses that reduce it most get an NLP fit.
+            scores = screen_scores(model, pending, [x[:2] for x in selected], r_nom, id_force, q_s, v_s, eps, v_scale, stops)
+            pending = sorted(pending, key=lambda je: scores[je])[:screen]
+        for joint, effect in pending:
+            say(f"testing {effect} on {joint}")
+            trial = trial_of([s[:2] for s in selected] + [(joint, effect)], current)
+            names = _free_for(model, joint, effect)
+            size = float(np.sqrt(np.mean(((trial.q_fit - current.q_fit) / sigma_q) ** 2)))
+            supported = trial.success and not _at_bound_values(trial, names, nominal_z)
+            rows.append({"joint": joint, "type": effect, "trial": trial, "k": _n_params(names),
+                         "value": _reported_value(model, joint, effect, trial.values),
+                         "rss": _rss_q(trial.q_fit, fit_rec.q, sigma_q), "effect_size_sigma": size,
+                         "supported": supported})
         if not rows:
             break
         # One effective sample count for the whole round (so candidates compare on one scale):

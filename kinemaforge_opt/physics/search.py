@@ -68,7 +68,7 @@ class _StructuredNLP:
     defects (interval order), then |axis|² - 1 per free-axis block.  Objective: the noise-
     normalised squared output error at the samples, averaged over samples (as ``output_q``)."""
 
-    def __init__(self, fit, max_iter: int, tol: float = 1e-8, print_level: int = 0):
+    def __init__(self, fit, max_iter: int, tol: float = 1e-6, print_level: int = 0):
         import casadi as ca
 
         rec = fit.recording
@@ -221,8 +221,20 @@ class _StructuredNLP:
         jac_fn = ca.Function("nlp_jac_g", [w, p], [g, jac], ["x", "p"], ["g", "jac_g_x"])
         hess_fn = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"],
                               ["triu_hess_gamma_x_x"])
+        # Bound the CPU time of a solve by max_iter iterations of typical cost (one Hessian and
+        # one Jacobian evaluation, timed here, the bulk of an iteration): a hypothesis that
+        # sends IPOPT into a long restoration phase is abandoned (not converged) instead of
+        # costing minutes.
+        import time as _time
+
+        w_probe = np.zeros(nw)
+        t0 = _time.process_time()
+        hess_fn(w_probe, [], 1.0, np.zeros(ng))
+        jac_fn(w_probe, [])
+        t_eval = _time.process_time() - t0
         opts = {"ipopt.max_iter": max_iter, "ipopt.tol": tol, "ipopt.print_level": print_level, "print_time": False,
-                "ipopt.sb": "yes", "jac_g": jac_fn, "hess_lag": hess_fn}
+                "ipopt.sb": "yes", "jac_g": jac_fn, "hess_lag": hess_fn,
+                "ipopt.max_cpu_time": max(1.0, max_iter * t_eval)}
         self.solver = ca.nlpsol("hypotheses", "ipopt", {"x": w, "f": f, "g": g}, opts)
         self.fit = fit
 
