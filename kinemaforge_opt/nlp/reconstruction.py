@@ -512,7 +512,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         scale = ca.DM(np.concatenate([v_s, a_s]))
         dnorm = defect / (h * scale) / options.dyn_sigma
         interval = ca.Function("hermite_simpson", [xk, xk1, rk, rk1, wk, wk1, ps, fs, ss, h, theta_sx, phi],
-                               [ca.sum1(pseudo_huber(dnorm, 1.0)), h / 6 * (wk + 4 * wm + wk1)], jit)
+                               [ca.sum1(pseudo_huber(dnorm, 1.0)), h / 6 * (wk + 4 * wm + wk1), dnorm], jit)
         energy = ca.Function("energy", [xs, theta_sx], [energy_of(xs)], jit)
         t_mid = (t_grid[:-1] + t_grid[1:]) / 2
         P, F, S = _wrench_at(data, t_grid, pushed or [""])
@@ -529,7 +529,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
                     phi_parts.append(ca.MX(values[k]))
         phi_mx = ca.vertcat(*phi_parts)
         Rg, Wg = point.map(G)(X, P, F, S, theta_mx, phi_mx)
-        Dsum, Wk = interval.map(G - 1)(X[:, :-1], X[:, 1:], Rg[:, :-1], Rg[:, 1:], Wg[:, :-1], Wg[:, 1:],
+        Dsum, Wk, _ = interval.map(G - 1)(X[:, :-1], X[:, 1:], Rg[:, :-1], Rg[:, 1:], Wg[:, :-1], Wg[:, 1:],
                                        Pm, Fm, Sm, np.diff(t_grid)[None, :], theta_mx, phi_mx)
         terms["dyn"] = ca.sum2(Dsum)
         if use_energy:
@@ -554,7 +554,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         raise KinemaforgeError("the screw NLP has no active term: enable 'vis' (with observed points) or 'dyn'")
     new_state = dataclasses.replace(state, t=t_grid, q=q0, v=v0 if use_dyn else None)
     hess_lag = None
-    if use_dyn and options.hessian == "exact":
+    if use_dyn and options.hessian in ("exact", "gauss_newton"):
         pnames = [name for name in prob.terms["variables"] if name != "x"]
         theta_phi = ca.Function("theta_phi", [prob._vars[name].symbol for name in pnames], [theta_mx, phi_mx])
         hess_lag = lagrangian_hessian(DenseTerms(
@@ -562,7 +562,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             np.diff(t_grid), vis_blocks, 1.0 / norm, options.energy if use_energy else "off",
             edges if use_energy else [], e_scale if use_energy else 1.0,
             options.energy_weight / options.energy_sigma**2,
-            [(f"axis:{j.name}", f"unit_axis:{j.name}") for j in joints]))
+            [(f"axis:{j.name}", f"unit_axis:{j.name}") for j in joints], options.hessian == "gauss_newton"))
     return ScrewProblem(prob, data, options, new_state, frame_cols, dyn, tuple(free), use_dyn, n_vis, hess_lag)
 
 
@@ -591,9 +591,9 @@ def _solver_options(options: ScrewOptions, dense: bool, hess_lag: ca.Function | 
     out = {"ipopt.acceptable_tol": 1e-5}
     if options.hessian == "lbfgs":
         out["ipopt.hessian_approximation"] = "limited-memory"
-    if hess_lag is not None:
+    if hess_lag is not None:  # the structured Hessian: the MX graph's own derivatives are cheap
         out["hess_lag"] = hess_lag
-    if dense and options.expand and not options.jit:
+    elif dense and options.expand and not options.jit:
         out["expand"] = True
     return out
 

@@ -64,6 +64,7 @@ class DenseTerms:
     e_scale: float
     energy_coef: float
     axis_vars: list
+    gauss_newton: bool = False
 
 
 def _layout(problem) -> tuple[dict[str, slice], dict[str, slice], int, int]:
@@ -134,10 +135,15 @@ def lagrangian_hessian(t: DenseTerms) -> ca.Function:
     h, lf, mu = ca.SX.sym("h"), ca.SX.sym("lf"), ca.SX.sym("mu")
     r0, w0 = t.point(xk, pk, fk, sk, theta, phi)
     r1, w1 = t.point(xk1, pk1, fk1, sk1, theta, phi)
-    d, W = t.interval(xk, xk1, r0, r1, w0, w1, pm, fm, sm, h, theta, phi)
+    d, W, dn = t.interval(xk, xk1, r0, r1, w0, w1, pm, fm, sm, h, theta, phi)
     wk = ca.vertcat(xk, xk1, zs)
-    Hk = ca.densify(ca.hessian(lf * d + mu * W, wk)[0])
     gW = ca.densify(ca.jacobian(W, wk))
+    if t.gauss_newton:
+        # ρ(r) = √(1 + r²) − 1 per normalised defect: Jᵀ diag(ρ''(r)) J, and no curvature of W
+        Jd = ca.densify(ca.jacobian(dn, wk))
+        Hk = lf * ca.mtimes(Jd.T, Jd * ca.repmat((1 + dn**2) ** -1.5, 1, Jd.shape[1]))
+    else:
+        Hk = ca.densify(ca.hessian(lf * d + mu * W, wk)[0])
     wrench_args = [pk, fk, sk, pk1, fk1, sk1, pm, fm, sm, h]
     f_int = ca.Function("dyn_hess", [xk, xk1, zs, *wrench_args, lf, mu], [Hk, gW], {"cse": True})
     f_work = ca.Function("work", [xk, xk1, zs, *wrench_args], [W], {"cse": True})
@@ -188,7 +194,8 @@ def lagrangian_hessian(t: DenseTerms) -> ca.Function:
         nu_e = ca.horzcat(-coef[0], *[coef[e - 1] - coef[e] for e in range(1, nwin)], coef[nwin - 1])
         He, gE = f_e.map(len(edges))(X[:, edges], z, nu_e)
         idx_e = np.array([np.concatenate([xcol(c), zidx]) for c in edges])
-        add_blocks(idx_e, He)
+        if not t.gauss_newton:
+            add_blocks(idx_e, He)
     Hd, gW_all = f_int.map(K)(X[:, :-1], X[:, 1:], z, *wr, lfw, mu_k)
     idx_d = np.array([np.concatenate([xcol(k), xcol(k + 1), zidx]) for k in range(K)])
     add_blocks(idx_d, Hd)
