@@ -58,6 +58,7 @@ from .structured_hessian import DenseTerms, lagrangian_hessian
 from .visual import Correspondences, SurfaceModel, correspond, surface_model, fixed_subsample, pseudo_huber, robust_value, z_vector
 
 ENERGY_MODES = ("soft", "hard", "off")
+HESSIANS = ("exact", "gauss_newton", "flat", "lbfgs")
 
 
 @dataclass(frozen=True)
@@ -73,7 +74,10 @@ class ScrewOptions:
     energy-balance residual per window.  energy_weight: multiplies the soft energy term.
     energy_window_s: energy window length [s].  fit_dynamics: free damping, Coulomb friction and
     an inertia ratio per moving link when forces are recorded.  max_iter: IPOPT iterations per
-    solve.  jit: compile the mapped functions (needs a C compiler).  hessian: "exact" or "lbfgs".
+    solve.  jit: compile the mapped functions (needs a C compiler).  hessian: of the dense stage's
+    Lagrangian: "exact" (assembled from per-block derivatives, :mod:`.structured_hessian`),
+    "gauss_newton" (the same blocks, no curvature of the dynamics residuals: converges slowly here),
+    "flat" (casadi's exact Hessian of the whole expanded graph: seconds to build) or "lbfgs".
     expand: expand the dense stage to SX (see :func:`_solver_options`).  refuse: after the warm-up,
     rebuild every surface model from all steps' observed points moved back to q = 0 by the
     NLP's motion, and warm up again on it.
@@ -103,6 +107,8 @@ class ScrewOptions:
             raise KinemaforgeError(f"energy must be one of {ENERGY_MODES}, got {self.energy!r}")
         if not (self.vis or self.dyn):
             raise KinemaforgeError("the screw NLP needs at least one of the terms 'vis' and 'dyn'")
+        if self.hessian not in HESSIANS:
+            raise KinemaforgeError(f"hessian must be one of {HESSIANS}, got {self.hessian!r}")
         if self.points_per_part < 3 or self.rounds < 1 or self.substep_s <= 0:
             raise KinemaforgeError("points_per_part >= 3, rounds >= 1 and substep_s > 0 are required")
 
@@ -591,6 +597,11 @@ def _solver_options(options: ScrewOptions, dense: bool, hess_lag: ca.Function | 
     out = {"ipopt.acceptable_tol": 1e-5}
     if options.hessian == "lbfgs":
         out["ipopt.hessian_approximation"] = "limited-memory"
+    if dense:
+        # the dense problem is non-convex (IPOPT corrects the Hessian's inertia at most
+        # iterations); the monotone barrier update crawled there: protocol_cabinet_0 101
+        # iterations -> 26 adaptive, the hard-energy test door 200 (not converged) -> 79
+        out["ipopt.mu_strategy"] = "adaptive"
     if hess_lag is not None:  # the structured Hessian: the MX graph's own derivatives are cheap
         out["hess_lag"] = hess_lag
     elif dense and options.expand and not options.jit:
