@@ -1,0 +1,53 @@
+"""The screw NLP's assembled Lagrangian Hessian against casadi's own exact Hessian of the whole
+problem graph (automatic differentiation of the flat objective and constraints)."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from kinemaforge_opt.errors import KinemaforgeError
+from kinemaforge_opt.nlp.reconstruction import ScrewOptions, build_screw_problem, correspondences, initial_state
+
+from .test_screw_nlp import AXIS, ORIGIN, TILT
+from .worlds import door_model, exact_data, pushed_trajectory
+
+
+@pytest.fixture(scope="module")
+def data():
+    true = door_model(AXIS, ORIGIN, damping=0.5)
+    init = door_model(TILT @ AXIS, ORIGIN + [0.01, -0.008, 0.0])
+    t, q, _, w = pushed_trajectory(true, 1.5, 60, 0.5, 1.0)
+    idx = np.arange(0, t.size, 6)
+    return exact_data(true, init, t[idx], q[idx], q[idx] + np.random.default_rng(1).normal(0, 0.02, idx.size),
+                      wrenches=w)
+
+
+@pytest.mark.parametrize("energy", ["soft", "hard", "off"])
+def test_assembled_hessian_equals_the_exact_hessian_of_the_lagrangian(data, energy):
+    opts = ScrewOptions(energy=energy, energy_window_s=0.5)  # 3 windows of 5 intervals
+    state = initial_state(data)
+    sp = build_screw_problem(data, opts, state, correspondences(data, state, 50), dense=True)
+    prob = sp.problem
+    names = prob.terms["variables"]
+    x = ca.vertcat(*[ca.vec(prob._vars[n].symbol) for n in names])
+    f = sum(prob._costs.values(), ca.MX(0))
+    g = ca.vertcat(*[c[0] for c in prob._constraints.values()])
+    lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", g.numel())
+    reference = ca.Function("H", [x, lam_f, lam_g], [ca.hessian(lam_f * f + ca.dot(lam_g, g), x)[0]])
+    rng = np.random.default_rng(2)
+    for _ in range(2):  # away from the initial guess, random multipliers
+        x0 = np.concatenate([prob._vars[n].init for n in names]) + rng.normal(0, 0.05, x.numel())
+        lg = rng.normal(0, 1, g.numel())
+        A = reference(x0, 0.7, lg).full()
+        B = sp.hess_lag(x0, [], 0.7, lg).full()
+        assert not np.tril(B, -1).any()
+        full = np.triu(B) + np.triu(B, 1).T
+        assert np.abs(A).max() > 1.0
+        np.testing.assert_allclose(full, A, atol=1e-9 * np.abs(A).max())
+
+
+def test_hessian_option_is_checked_with_a_message():
+    with pytest.raises(KinemaforgeError, match="hessian must be one of .*'exact'.*got 'newton'"):
+        ScrewOptions(hessian="newton")
