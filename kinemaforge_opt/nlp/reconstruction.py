@@ -30,10 +30,11 @@ Named costs (each reported at the optimum; any can be switched off):
 The objective is the sum of the terms divided by the number of visual residuals.  Every
 per-step function is ``casadi.Function.map``-ped over the time steps, so the graph stays small and
 ``jit`` is an option (it works, but compiling each stage costs more than it saves here).  The
-dense stage is expanded to SX for IPOPT's exact Hessian: on protocol_cabinet_0 (2 doors, 77 grid
-points) building that Hessian is ~5 s CPU of the stage, the solve ~1–3 s; L-BFGS did not converge
-there.  Assembling the Hessian from per-interval blocks (as ``physics.search`` does) is the way to
-cut the build.  Coarse-to-fine (:func:`refine_screws`): closed-form init → ``vis`` warm-up
+dense stage's Lagrangian Hessian is assembled from per-block derivatives
+(:mod:`.structured_hessian`, the exact Hessian, build independent of the number of intervals):
+on protocol_cabinet_0 (2 doors, 77 grid points) the stage's build went from ~7 s CPU (casadi's
+Hessian of the expanded graph, still ``hessian="flat"``) to ~0.5 s; L-BFGS did not converge
+there.  Coarse-to-fine (:func:`refine_screws`): closed-form init → ``vis`` warm-up
 on the frame grid with correspondences refreshed between solves → full objective on the dense
 grid.
 """
