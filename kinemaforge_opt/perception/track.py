@@ -47,6 +47,9 @@ from .segment import CLUSTER_VOXELS, clusters
 ICP_COARSE_VOXELS = 4.0
 ICP_FINE_VOXELS = 1.5
 ICP_ITERATIONS = 20
+# The coarse pass starts at this multiple of the coarse radius (a part starting to move between
+# two samples — a fridge door swinging 20° — lands far outside the coarse basin).
+WIDE_FACTOR = 3.0
 # ICP stops when an iteration moves the points by less than this share of a voxel.
 ICP_TOLERANCE_VOXELS = 0.05
 # The coarse ICP pass uses every n-th point (it only has to reach the fine basin).
@@ -209,7 +212,8 @@ class Tracker:
     def _icp(self, points: np.ndarray, s: int, T0: np.ndarray) -> np.ndarray:
         """Coarse pass on every COARSE_SUBSAMPLE-th point, then the fine pass on all of them."""
         tol = ICP_TOLERANCE_VOXELS * self.voxel
-        T = icp(points[::COARSE_SUBSAMPLE], self.trees[s], self.targets[s], T0, (ICP_COARSE_VOXELS * self.voxel,), tolerance=tol)
+        T = icp(points[::COARSE_SUBSAMPLE], self.trees[s], self.targets[s], T0,
+                (WIDE_FACTOR * ICP_COARSE_VOXELS * self.voxel, ICP_COARSE_VOXELS * self.voxel), tolerance=tol)
         return icp(points, self.trees[s], self.targets[s], T, (ICP_FINE_VOXELS * self.voxel,), tolerance=tol)
 
     def solve_step(self, points: np.ndarray, s: int, guesses: list[np.ndarray]) -> np.ndarray | None:
