@@ -48,6 +48,10 @@ def test_finds_friction_and_damping(friction_case):
     assert d.mismatch[0].regions["v>0"] < 0 < d.mismatch[0].regions["v<0"]
     assert d.held_out.rms_after < d.held_out.rms_before / 5
     assert d.model.joint(model.joint_names[0]).dynamics.coulomb > 0
+    # the selection was also checked by simulating the fit span, and it simulates it better
+    (check,) = [t for t in d.tested if "simulation_check" in t]
+    before, after = check["fit_span_simulated_rms"]
+    assert after < before / 3
 
 
 def test_writes_the_diagnosis_contract(friction_case, tmp_path):
