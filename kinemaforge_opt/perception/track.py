@@ -209,18 +209,20 @@ class Tracker:
             viol += v < 0
         return float(np.mean(cons > 0)), float(np.mean((viol > 0) & (cons == 0)))
 
-    def _icp(self, points: np.ndarray, s: int, T0: np.ndarray) -> np.ndarray:
+    def _icp(self, points: np.ndarray, s: int, T0: np.ndarray, wide: bool = False) -> np.ndarray:
         """Coarse pass on every COARSE_SUBSAMPLE-th point, then the fine pass on all of them."""
         tol = ICP_TOLERANCE_VOXELS * self.voxel
-        T = icp(points[::COARSE_SUBSAMPLE], self.trees[s], self.targets[s], T0,
-                (WIDE_FACTOR * ICP_COARSE_VOXELS * self.voxel, ICP_COARSE_VOXELS * self.voxel), tolerance=tol)
+        radii = (ICP_COARSE_VOXELS * self.voxel,)
+        if wide:
+            radii = (WIDE_FACTOR * radii[0],) + radii
+        T = icp(points[::COARSE_SUBSAMPLE], self.trees[s], self.targets[s], T0, radii, tolerance=tol)
         return icp(points, self.trees[s], self.targets[s], T, (ICP_FINE_VOXELS * self.voxel,), tolerance=tol)
 
     def solve_step(self, points: np.ndarray, s: int, guesses: list[np.ndarray]) -> np.ndarray | None:
         """Best verified (4, 4) world motion of (N, 3) reference points to step s, or None."""
         if self.trees[s] is None or len(self.targets[s]) < 3:
             return None
-        for cands in [[g] for g in guesses] + [None]:
+        for cands, wide in [([g], False) for g in guesses] + [(guesses, True), (None, False)]:
             if cands is None:  # re-detection
                 cands = [T for cluster in self.moving_clusters(s) for T in pca_alignments(points, cluster)]
             best, best_score = None, -np.inf
@@ -228,7 +230,7 @@ class Tracker:
                 # only the points the images confirm at the guess take part (a door's inner face,
                 # turned away near closed, would otherwise pull onto the body behind it)
                 seen = self.verdicts(points @ T0[:3, :3].T + T0[:3, 3], s)[0] > 0
-                T = self._icp(points[seen] if seen.sum() >= MIN_VISIBLE_SHARE * len(points) else points, s, T0)
+                T = self._icp(points[seen] if seen.sum() >= MIN_VISIBLE_SHARE * len(points) else points, s, T0, wide)
                 cons, viol = self.verify(points @ T[:3, :3].T + T[:3, 3], s)
                 if cons - viol > best_score and cons >= MIN_CONSISTENT_SHARE and viol <= MAX_VIOLATED_SHARE:
                     best, best_score = T, cons - viol
