@@ -23,6 +23,13 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
+def _broken(t: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``y`` with NaN where the samples jump over a gap (> 1.5 median steps: the state window of
+    a segment is fitted, not predicted), so that a line is not drawn across it."""
+    gap = np.diff(t, prepend=t[0]) > 1.5 * np.median(np.diff(t))
+    return np.where(gap, np.nan, y)
+
+
 def plot_diagnosis(d: Diagnosis, out_dir: str | Path) -> list[Path]:
     """Write residual_time.png, residual_state.png and fit_before_after.png; returns their paths."""
     out_dir = Path(out_dir)
@@ -61,8 +68,8 @@ def plot_diagnosis(d: Diagnosis, out_dir: str | Path) -> list[Path]:
         fig, axes = plt.subplots(n, 1, figsize=(9, 2.6 * n), squeeze=False)
         for k, ax in enumerate(axes[:, 0]):
             ax.plot(h.t, h.q_rec[:, k], "k.", ms=3, label="recorded (held out)")
-            ax.plot(h.t, h.q_before[:, k], lw=1.2, label=f"nominal (RMS {h.rms_before:.3g})")
-            ax.plot(h.t, h.q_after[:, k], lw=1.2, label=f"augmented (RMS {h.rms_after:.3g})")
+            ax.plot(h.t, _broken(h.t, h.q_before[:, k]), lw=1.2, label=f"nominal (RMS {h.rms_before:.3g})")
+            ax.plot(h.t, _broken(h.t, h.q_after[:, k]), lw=1.2, label=f"augmented (RMS {h.rms_after:.3g})")
             ax.set_ylabel(names[k])
             ax.legend(loc="best", fontsize=8)
         axes[-1, 0].set_xlabel("t [s]")
