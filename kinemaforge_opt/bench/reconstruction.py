@@ -386,11 +386,36 @@ def run_reconstruction(size: RecoSize, out_dir: str | Path, cache: Path | None =
     """Run the reconstruction benchmark at ``size``; reconstructions go under
     ``out_dir/reconstruction``, generated cases under ``cache`` (default :func:`cache_root`).
     Returns the "reconstruction" part of the bench document (see :mod:`.report`)."""
+    t_start = time.perf_counter()
+    runs = _Runs(Path(out_dir) / "reconstruction", cache or cache_root(), progress or (lambda s: None), size.budget_s)
+    result = tabulate(size, runs)
+    return {**result, "records": list(runs.memo.values()), "generation_s": runs.generation_s,
+            "total_s": time.perf_counter() - t_start}
+
+
+def tables_from_records(size: RecoSize, records: list[dict], total_s: float | None = None) -> dict:
+    """The "reconstruction" part rebuilt from finished run records (e.g. the lines of
+    OUT/reconstruction/records.jsonl of an interrupted run): a run missing from ``records`` is
+    recorded as skipped."""
+    memo = {(r["case"], json.dumps(r["options"], sort_keys=True)): r for r in records}
+    used = {}
+
+    def lookup(case, options=None):
+        key = (case.name, json.dumps(dict(options or {}), sort_keys=True))
+        used[key] = memo.get(key) or {"case": case.name, "category": case.category, "views": case.views,
+                                      "frames": case.frames, "options": dict(options or {}), "ok": False,
+                                      "skipped": True, "error": "skipped: not in the records"}
+        return used[key]
+
+    result = tabulate(size, lookup)
+    return {**result, "records": list(used.values()), "generation_s": 0.0, "total_s": total_s or 0.0}
+
+
+def tabulate(size: RecoSize, runs) -> dict:
+    """Every table of the reconstruction part at ``size``; ``runs(case, options)`` returns the
+    scored record of one reconstruction (running it, or looking it up)."""
     from problems.reco_sizes import protocol_case
 
-    say = progress or (lambda s: None)
-    t_start = time.perf_counter()
-    runs = _Runs(Path(out_dir) / "reconstruction", cache or cache_root(), say, size.budget_s)
     base = dict(views=size.views, frames=size.frames, width=size.width, height=size.height)
 
     # Table 1
@@ -435,6 +460,5 @@ def run_reconstruction(size: RecoSize, out_dir: str | Path, cache: Path | None =
         "size": asdict(size), "seed_paper": SEED_TABLE1, "table1": table1, "table2": table2,
         "table1_cases": [r["case"] for r in t1], "drift_vs_horizon": drift,
         "sensitivity": {"energy_weight": energy, "views": views},
-        "scaling": scaling, "records": list(runs.memo.values()),
-        "generation_s": runs.generation_s, "total_s": time.perf_counter() - t_start,
+        "scaling": scaling,
     }
