@@ -214,7 +214,10 @@ def plot_stage_scaling(reco: dict, path: Path) -> Path | None:
         ax.set_xlabel(key)
         ax.set_ylabel("time [s]")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+        else:
+            ax.text(0.5, 0.5, "no complete run", ha="center", va="center", transform=ax.transAxes)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
