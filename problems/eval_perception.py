@@ -27,11 +27,11 @@ import cv2
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from kinemaforge_opt.bench.metrics import JointRecord
+from kinemaforge_opt.bench.reconstruction import true_joints
 from kinemaforge_opt.graph import infer_tree
 from kinemaforge_opt.graph.tree import GraphResult
 from kinemaforge_opt.io.sequence import load_sequence
-from kinemaforge_opt.io.tracks import read_tracks
-from kinemaforge_opt.model import read_urdf
 from kinemaforge_opt.perception import perceive
 from kinemaforge_opt.perception.perceive import Perception
 from kinemaforge_opt.perception.reconstruct import BASE, ENVIRONMENT, pixel_labels, point_labels
@@ -52,39 +52,20 @@ def instance_case(category: str, instance: int, views: int = 4, frames: int = 30
                 width=width, height=height, expected="perception: joint types, topology, IoU ≥ 0.95, axis ≤ 3°")
 
 
-@dataclass(frozen=True)
-class TruthJoint:
-    """A ground-truth movable joint: type, parent/child link, world axis (3,) and a point (3,) on
-    its line [m] (the joint origin at the first time step)."""
-
-    name: str
-    type: str
-    parent: str
-    child: str
-    axis_world: np.ndarray
-    origin_world: np.ndarray
-
-
 @dataclass(frozen=True, eq=False)
 class Truth:
     """Ground truth of a generated case: joints, the link of each label id, the labels folder."""
 
-    joints: tuple[TruthJoint, ...]
+    joints: tuple[JointRecord, ...]  # the movable ones
     label_names: dict[int, str]
     labels_dir: Path
 
 
 def ground_truth(case_root: str | Path) -> Truth:
-    """Read the joint lines (nominal model placed by the true link poses at the first step) and the
-    label legend of a case written by ``generate_case``."""
+    """Read the true movable joint lines (``bench.reconstruction.true_joints``) and the label
+    legend of a case written by ``generate_case``."""
     root = Path(case_root)
-    model = read_urdf(root / "model.urdf")
-    tracks = read_tracks(root / "tracks.csv")
-    joints = []
-    for j in model.movable_joints:
-        T_world_parent = tracks.Ts_world_track(tracks.names.index(j.parent))[0]
-        T = T_world_parent @ j.T_parent_joint
-        joints.append(TruthJoint(j.name, j.type, j.parent, j.child, T[:3, :3] @ j.axis, T[:3, 3].copy()))
+    joints = [j for j in true_joints(root) if j.type != "fixed"]
     legend = json.loads((root / "ground_truth" / "case.json").read_text())["label_legend"]
     return Truth(tuple(joints), {int(k): v for k, v in legend.items()}, root / "ground_truth" / "labels")
 

@@ -639,7 +639,10 @@ def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
         if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
             continue
         tol = max(5 * sigma[k], 0.01 * (lim.upper - lim.lower))
-        moved = np.cumsum(np.abs(np.diff(rec.q[:, k], prepend=rec.q[0, k]))) > tol  # ignore a start at rest on a stop
+        # ignore a start at rest on a stop: count a stop only once the joint has left its start
+        # (summing |Δq| would count noise as motion)
+        start = np.median(rec.q[:5, k])
+        moved = np.maximum.accumulate(np.abs(rec.q[:, k] - start)) > tol
         hit |= moved & ((rec.q[:, k] <= lim.lower + tol) | (rec.q[:, k] >= lim.upper - tol))
     if not hit.any():
         return rec
