@@ -641,8 +641,7 @@ def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
         tol = max(5 * sigma[k], 0.01 * (lim.upper - lim.lower))
         # ignore a start at rest on a stop: count a stop only once the joint has left its start
         # (summing |Δq| would count noise as motion)
-        start = np.median(rec.q[:5, k])
-        moved = np.maximum.accumulate(np.abs(rec.q[:, k] - start)) > tol
+        moved = np.maximum.accumulate(np.abs(rec.q[:, k] - rec.q[0, k])) > tol
         hit |= moved & ((rec.q[:, k] <= lim.lower + tol) | (rec.q[:, k] >= lim.upper - tol))
     if not hit.any():
         return rec
