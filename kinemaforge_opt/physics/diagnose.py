@@ -552,43 +552,44 @@ def diagnose(
                 current = trial
 
     nominal_model = _model_of(model, nominal_trial)
+
+    def drop_until_better(span: Recording, span_s: float | None, droppable: list[int], check: str, rms_key: str,
+                          doing: str) -> None:
+        """Drop selected effects, the last of ``droppable`` (indices into ``selected``) first,
+        until the selection simulates ``span`` better than the nominal model (or none is left).
+        ``doing``: progress text, formatted with the number of effects ``n``."""
+        nonlocal current
+        while droppable:
+            say(doing.format(n=len(selected)))
+            h = predict_before_after(nominal_model, _model_of(model, current), span, span_s)
+            tested.append({check: [f"{e} on {j}" for j, e, _ in selected], rms_key: [h.rms_before, h.rms_after]})
+            if h.rms_after < h.rms_before:
+                return
+            joint, effect, _ = selected.pop(droppable.pop())
+            say(f"dropped {effect} on {joint}: its simulation got no better")
+            equivalents.pop((joint, effect), None)
+            current = trial_of([x[:2] for x in selected], nominal_trial) if selected else nominal_trial
+
     # The collocation fit lets states bend where the dynamics are soft, so a set of effects can
     # fit it without explaining the motion.  The selection must also simulate the fit span
     # better than the nominal model (in SIMULATION_CHECK_S pieces, each from its own best state:
     # open-loop replays of many seconds diverge for any model); if it does not, effects are
     # dropped, last selected first, until it does (or none is left).  Limit contact is judged by
     # the fit alone: it is not part of an ArticulatedModel, so the simulation cannot show it.
-    simulable = [k for k, x in enumerate(selected) if x[1] != "limit_contact"]
-    while simulable:
-        say(f"simulating the fit span with {len(selected)} effect(s)")
-        sim = predict_before_after(nominal_model, _model_of(model, current), fit_rec, segment_s or SIMULATION_CHECK_S)
-        tested.append({"simulation_check": [f"{e} on {j}" for j, e, _ in selected],
-                       "fit_span_simulated_rms": [sim.rms_before, sim.rms_after]})
-        if sim.rms_after < sim.rms_before:
-            break
-        joint, effect, _ = selected.pop(simulable.pop())
-        say(f"dropped {effect} on {joint}: the simulation of the fit span got no better")
-        equivalents.pop((joint, effect), None)
-        current = trial_of([x[:2] for x in selected], nominal_trial) if selected else nominal_trial
+    drop_until_better(fit_rec, segment_s or SIMULATION_CHECK_S,
+                      [k for k, x in enumerate(selected) if x[1] != "limit_contact"],
+                      "simulation_check", "fit_span_simulated_rms", "simulating the fit span with {n} effect(s)")
 
     floor_final = float(np.sqrt(_rss_q(current.q_fit, fit_rec.q, sigma_q) / n_res))
     if selected and floor_final > THRESHOLD_SIGMA and held is not None:
         # Even with every selected effect the fit stays above the located-mismatch level: the
         # output error is dominated by model-form error the library cannot express, and its
         # likelihood is no longer evidence for specific effects.  Then the selection must also
-        # predict the held-out span better than the nominal model; if it does not, effects are
-        # dropped, last selected first, until it does (or none is left).  The held-out figure is
-        # then no longer independent (the summary says so).
+        # predict the held-out span better than the nominal model, else effects are dropped as
+        # above.  The held-out figure is then no longer independent (the summary says so).
         judged_by_held_out = True
-        while selected:
-            say(f"checking {len(selected)} effect(s) on the held-out span")
-            h = predict_before_after(nominal_model, _model_of(model, current), held, segment_s)
-            tested.append({"held_out_check": [f"{e} on {j}" for j, e, _ in selected],
-                           "held_out_rms": [h.rms_before, h.rms_after]})
-            if h.rms_after < h.rms_before:
-                break
-            selected.pop()
-            current = trial_of([s[:2] for s in selected], nominal_trial) if selected else nominal_trial
+        drop_until_better(held, segment_s, list(range(len(selected))), "held_out_check", "held_out_rms",
+                          "checking {n} effect(s) on the held-out span")
 
     say("re-fitting with the selected effects")
     final = _calibration(model, fit_rec, current, [s[:2] for s in selected], stops, segment_s, sigma_q)
