@@ -23,12 +23,11 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from kinemaforge_opt.bench.metrics import JointRecord
-from kinemaforge_opt.bench.reconstruction import true_joints
+from kinemaforge_opt.bench.reconstruction import label_confusion, true_joints
 from kinemaforge_opt.graph import infer_tree
 from kinemaforge_opt.graph.tree import GraphResult
 from kinemaforge_opt.io.sequence import load_sequence
@@ -54,39 +53,27 @@ def instance_case(category: str, instance: int, views: int = 4, frames: int = 30
 
 @dataclass(frozen=True, eq=False)
 class Truth:
-    """Ground truth of a generated case: joints, the link of each label id, the labels folder."""
+    """Ground truth of a generated case: its movable joints and its folder (label images and
+    legend under ground_truth/)."""
 
-    joints: tuple[JointRecord, ...]  # the movable ones
-    label_names: dict[int, str]
-    labels_dir: Path
+    joints: tuple[JointRecord, ...]
+    root: Path
 
 
 def ground_truth(case_root: str | Path) -> Truth:
-    """Read the true movable joint lines (``bench.reconstruction.true_joints``) and the label
-    legend of a case written by ``generate_case``."""
+    """The true movable joint lines (``bench.reconstruction.true_joints``) of a case written by
+    ``generate_case``."""
     root = Path(case_root)
-    joints = [j for j in true_joints(root) if j.type != "fixed"]
-    legend = json.loads((root / "ground_truth" / "case.json").read_text())["label_legend"]
-    return Truth(tuple(joints), {int(k): v for k, v in legend.items()}, root / "ground_truth" / "labels")
+    return Truth(tuple(j for j in true_joints(root) if j.type != "fixed"), root)
 
 
 def _confusion(per: Perception, graph: GraphResult, truth: Truth) -> tuple[dict, list[str], list[str]]:
     """Pixel counts {(predicted part, true label name): n} over every kept pixel of every frame."""
     tree = graph.best
     part_of = {m: p for p, members in tree.parts.items() for m in members if m in per.tracks.names}
-    labels = point_labels(per, part_of)
-    counts: dict[tuple[str, str], int] = {}
-    frames = {f.frame.index: f.frame for c in per.clouds for f in c.views}
-    for index, (pixels, names) in pixel_labels(per, labels).items():
-        f = frames[index]
-        gt = cv2.imread(str(truth.labels_dir / f.camera / f"{index:06d}.png"), cv2.IMREAD_UNCHANGED)
-        true = np.array([truth.label_names.get(int(v), "nothing") for v in range(256)], dtype=object)[gt[pixels[:, 0], pixels[:, 1]]]
-        pred = np.asarray(names, dtype=object)
-        key = pred.astype(str) + "|" + true.astype(str)
-        u, n = np.unique(key, return_counts=True)
-        for k, c in zip(u, n):
-            a, b = k.split("|", 1)
-            counts[(a, b)] = counts.get((a, b), 0) + int(c)
+    frames = [v.frame for c in per.clouds for v in c.views]
+    C, preds, trues = label_confusion(truth.root, frames, pixel_labels(per, point_labels(per, part_of)))
+    counts = {(a, b): int(C[i, j]) for i, a in enumerate(preds) for j, b in enumerate(trues) if C[i, j]}
     return counts, sorted({a for a, _ in counts}), sorted({b for _, b in counts})
 
 

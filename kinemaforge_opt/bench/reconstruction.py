@@ -150,10 +150,11 @@ def true_joints(case_root: Path) -> list[JointRecord]:
     return out
 
 
-def label_confusion(case_root: Path, seq, pred: dict[int, tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, list, list]:
+def label_confusion(case_root: Path, frames, pred: dict[int, tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, list, list]:
     """Confusion counts of predicted against true pixel labels over every frame.
 
-    pred: frame index -> ((N, 2) (row, column) pixels, (N,) predicted part names).  The true label
+    frames: the sequence's Frames (index, camera).  pred: frame index -> ((N, 2) (row, column)
+    pixels, (N,) predicted part names).  The true label
     of each pixel is read from ground_truth/labels/<camera>/<index:06d>.png (legend in case.json).
     Returns (counts (P, L), P predicted names, L true names); accumulated frame by frame, so a
     full-size sequence (tens of millions of pixels) needs no more memory than one frame."""
@@ -161,7 +162,7 @@ def label_confusion(case_root: Path, seq, pred: dict[int, tuple[np.ndarray, np.n
 
     legend = json.loads((case_root / "ground_truth" / "case.json").read_text())["label_legend"]
     true_names = [legend.get(str(i), "nothing") for i in range(256)]
-    by_index = {f.index: f for f in seq.frames}
+    by_index = {f.index: f for f in frames}
     rows: dict = {}  # predicted name -> (256,) counts per true label code
     for idx, (pix, names) in pred.items():
         f = by_index[idx]
@@ -273,7 +274,7 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
     rec.update(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0, ok=True)
 
     seq = load_sequence(case_root / "sequence")
-    counts, pred_names, true_names = label_confusion(case_root, seq, pixel_labels(r.perception, r.labels))
+    counts, pred_names, true_names = label_confusion(case_root, seq.frames, pixel_labels(r.perception, r.labels))
     m = part_iou_from_counts(counts, pred_names, true_names, pred_ignore=(ENVIRONMENT,),
                              true_ignore=("nothing", "environment"))
     est = [JointRecord(j["name"], j["type"], j["parent"], j["child"], np.asarray(j["axis_world"], float),
