@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .report import save_png
+
 NOT_AVAILABLE = "not available"
 # (result key, column header, format); drift, energy: from reconstruction.json["verification"]
 COLUMNS = (
@@ -150,10 +152,7 @@ def plot_drift(reco: dict, path: Path) -> Path | None:
     ax.set_ylabel("drift [m]")
     ax.legend()
     ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_png(fig, path)
 
 
 def plot_sensitivity(reco: dict, path: Path) -> Path | None:
@@ -182,10 +181,7 @@ def plot_sensitivity(reco: dict, path: Path) -> Path | None:
     draw(axes[0, 0], [p["views"] for p in views], views, "views")
     if ncol == 2:
         draw(axes[0, 1], [p["energy_weight"] for p in e["points"]], e["points"], "energy weight", log=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_png(fig, path)
 
 
 def plot_stage_scaling(reco: dict, path: Path) -> Path | None:
@@ -218,7 +214,4 @@ def plot_stage_scaling(reco: dict, path: Path) -> Path | None:
             ax.legend(fontsize=7)
         else:
             ax.text(0.5, 0.5, "no complete run", ha="center", va="center", transform=ax.transAxes)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_png(fig, path)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ..io.atomic import write_text_atomic
+from ..io.atomic import atomic_path, write_text_atomic
 
 NOT_MEASURED = "not yet measured"
 TABLE1_CATEGORIES = ("cabinet", "drawer", "laptop", "refrigerator", "microwave", "average")
@@ -108,6 +108,17 @@ def timing_tables(stages: dict, scaling: dict | None) -> str:
             + _table(["rate [Hz]", "samples", "time [s]", "IPOPT iterations", "converged"], pts) + "\n")
 
 
+def save_png(fig, path: Path) -> Path:
+    """Lay out ``fig``, write it to ``path`` atomically (PNG, 120 dpi) and close it."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+    return path
+
+
 def plot_scaling(scaling: dict, path: Path) -> Path:
     import matplotlib
 
@@ -126,10 +137,7 @@ def plot_scaling(scaling: dict, path: Path) -> Path:
     ax.set_ylabel("solve time [s]")
     ax.legend()
     ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_png(fig, path)
 
 
 def plot_discovery(cases: list[dict], path: Path) -> Path:
@@ -154,10 +162,7 @@ def plot_discovery(cases: list[dict], path: Path) -> Path:
     ax.set_yticklabels(names, fontsize=7)
     ax.set_xlabel("held-out RMS after / before")
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_png(fig, path)
 
 
 def write_report(result: dict, out_dir: str | Path) -> dict[str, Path]:
