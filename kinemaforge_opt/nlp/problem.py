@@ -107,6 +107,23 @@ class Problem:
             "constraints": int(sum(c[0].numel() for c in self._constraints.values())),
         }
 
+    def layout(self) -> tuple[dict[str, slice], dict[str, slice]]:
+        """Where each variable sits in the decision vector x and each constraint in g (the
+        declaration order the solver uses): (variable name -> slice, constraint name -> slice)."""
+        xs, i = {}, 0
+        for n, v in self._vars.items():
+            xs[n] = slice(i, i + v.init.size)
+            i += v.init.size
+        gs, j = {}, 0
+        for n, c in self._constraints.items():
+            gs[n] = slice(j, j + c[0].numel())
+            j += c[0].numel()
+        return xs, gs
+
+    def symbol(self, name: str) -> ca.MX:
+        """The symbol of variable ``name``."""
+        return self._vars[name].symbol
+
     # --- solve ----------------------------------------------------------------------------
     def compile(self, max_iter: int = 500, tol: float = 1e-8, print_level: int = 0, options: dict | None = None) -> "CompiledProblem":
         """Build the IPOPT solver once (casadi ``nlpsol``); the returned :class:`CompiledProblem`
@@ -143,15 +160,7 @@ class CompiledProblem:
         opts.update(options or {})
         self.solver = ca.nlpsol(problem.name, "ipopt", {"x": x, "f": f, "g": g}, opts)
         self.evaluate = ca.Function("terms", [x], list(problem._costs.values()) + [c[0] for c in cons])
-        self._slices, i = {}, 0
-        for n in self.names:
-            size = problem._vars[n].init.size
-            self._slices[n] = slice(i, i + size)
-            i += size
-        self._gslices, i = {}, 0
-        for n, c in problem._constraints.items():
-            self._gslices[n] = slice(i, i + c[0].numel())
-            i += c[0].numel()
+        self._slices, self._gslices = problem.layout()
 
     def _vector(self, attr: str, override: dict | None) -> np.ndarray:
         out = np.concatenate([getattr(self.problem._vars[n], attr) for n in self.names]) if self.names else np.zeros(0)

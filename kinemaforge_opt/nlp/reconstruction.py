@@ -563,7 +563,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
     hess_lag = None
     if use_dyn and options.hessian in ("exact", "gauss_newton"):
         pnames = [name for name in prob.terms["variables"] if name != "x"]
-        theta_phi = ca.Function("theta_phi", [prob._vars[name].symbol for name in pnames], [theta_mx, phi_mx])
+        theta_phi = ca.Function("theta_phi", [prob.symbol(name) for name in pnames], [theta_mx, phi_mx])
         hess_lag = lagrangian_hessian(DenseTerms(
             prob, n, G, theta_phi, point, interval, energy if use_energy else None, (P, F, S), (Pm, Fm, Sm),
             np.diff(t_grid), vis_blocks, 1.0 / norm, options.energy if use_energy else "off",

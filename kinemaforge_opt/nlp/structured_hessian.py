@@ -67,21 +67,6 @@ class DenseTerms:
     gauss_newton: bool = False
 
 
-def _layout(problem) -> tuple[dict[str, slice], dict[str, slice], int, int]:
-    """Slices of every variable in the decision vector and of every constraint in g (the
-    declaration order :class:`~.problem.CompiledProblem` uses), and their totals."""
-    vs, i = {}, 0
-    for name in problem.terms["variables"]:
-        size = problem._vars[name].init.size
-        vs[name] = slice(i, i + size)
-        i += size
-    gs, j = {}, 0
-    for name, c in problem._constraints.items():
-        gs[name] = slice(j, j + c[0].numel())
-        j += c[0].numel()
-    return vs, gs, i, j
-
-
 def _scatter(nr: int, nc: int, rows: np.ndarray, cols: np.ndarray, vals: ca.MX) -> ca.MX:
     """Sparse (nr, nc) MX with entries vals[i] at (rows[i], cols[i]), duplicates summed."""
     key = cols.astype(np.int64) * nr + rows
@@ -109,7 +94,8 @@ def lagrangian_hessian(t: DenseTerms) -> ca.Function:
     """casadi Function (x, p, lam_f, lam_g) -> upper triangle of ∇²(λ_f f + λ_gᵀ g), for
     nlpsol's ``hess_lag`` option."""
     prob = t.problem
-    vs, gs, nw, ng = _layout(prob)
+    vs, gs = prob.layout()
+    nw, ng = prob.sizes["variables"], prob.sizes["constraints"]
     n, G = t.n, t.G
     nx = 2 * n
     pnames = [name for name in prob.terms["variables"] if name != "x"]
