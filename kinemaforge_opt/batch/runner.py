@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import json
+import os
 import time
 import traceback
 from dataclasses import dataclass
@@ -56,6 +57,32 @@ def _finished(out_dir: Path) -> dict | None:
     return doc if doc.get("status") == "ok" else None
 
 
+SINGLE_THREAD_ENV = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+
+
+def _init_ray(ray, address: str | None, workers: int | None) -> None:
+    """Start (or join) Ray with single-threaded BLAS/OpenMP in every worker.
+
+    A local cluster's workers inherit the driver's environment, so the variables are set around
+    ``ray.init`` instead of passed as a ``runtime_env``: a runtime_env makes Ray spawn fresh
+    workers instead of using the ones it pre-starts (start-up 6.1 -> 4.1 s on 2 cores).  An
+    existing cluster at ``address`` has its own workers, so it gets the runtime_env."""
+    kwargs = dict(include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+    if address:
+        ray.init(address=address, runtime_env={"env_vars": SINGLE_THREAD_ENV}, **kwargs)
+        return
+    saved = {k: os.environ.get(k) for k in SINGLE_THREAD_ENV}
+    os.environ.update(SINGLE_THREAD_ENV)
+    try:
+        ray.init(num_cpus=workers, **kwargs)
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k)
+            else:
+                os.environ[k] = v
+
+
 def run_batch(inputs: list[str | Path], out_dir: str | Path, job: Callable, address: str | None = None,
               workers: int | None = None, progress: bool = True) -> list[BatchItem]:
     """Run ``job(input, OUT/<name>)`` for every input in parallel on Ray.
@@ -86,9 +113,7 @@ def run_batch(inputs: list[str | Path], out_dir: str | Path, job: Callable, addr
     if todo:
         started = not ray.is_initialized()
         if started:
-            env = {"env_vars": {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}}
-            ray.init(address=address, num_cpus=None if address else workers, runtime_env=env,
-                     include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+            _init_ray(ray, address, workers)
         try:
             remote = ray.remote(num_cpus=1, max_retries=0)(_execute)
             refs = {remote.remote(job, str(paths[i]), str(out_dir / names[i])): i for i in todo}
