@@ -1,7 +1,7 @@
 """Run a job over many inputs on Ray (a local cluster by default, or an existing one at
 ``address``).  Each input's outcome goes to ``OUT/<name>/status.json``: ``{"status": "ok" |
-"error", "time_s", "result" | "error"}``; an input whose status is "ok" is skipped on a re-run
-(failed ones are retried).  A failing input never stops the others."""
+"error", "time_s", "started_unix_s", "finished_unix_s", "result" | "error"}``; an input whose
+status is "ok" is skipped on a re-run (failed ones are retried).  A failing input never stops the others."""
 
 from __future__ import annotations
 
@@ -37,13 +37,14 @@ def item_name(path: Path) -> str:
 
 def _execute(job: Callable, input_path: str, out_dir: str) -> dict:
     """Run ``job`` on one input, catching everything; writes and returns the status document."""
-    t0 = time.perf_counter()
+    t0, started = time.perf_counter(), time.time()
     try:
         doc = {"status": "ok", "result": job(input_path, out_dir)}
     except Exception as e:  # one failure must not stop the batch: record it
         doc = {"status": "error", "error": f"{type(e).__name__}: {e}",
                "traceback": traceback.format_exc(limit=5)}
     doc["time_s"] = time.perf_counter() - t0
+    doc["started_unix_s"], doc["finished_unix_s"] = started, time.time()
     doc["input"] = input_path
     write_text_atomic(Path(out_dir) / STATUS, json.dumps(doc, indent=2, default=str))
     return doc

@@ -47,3 +47,22 @@ def test_job_inputs_that_are_not_what_the_job_reads_are_named(tmp_path):
         JOBS["reconstruct"](tmp_path / "empty", tmp_path / "out")
     with pytest.raises(InputFileError, match="empty.*has no model.urdf"):
         JOBS["diagnose"](tmp_path / "empty", tmp_path / "out")
+
+
+def _thread_env(input_dir, out_dir):
+    import os
+
+    return {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+
+
+def test_local_workers_run_single_threaded_blas_and_the_driver_env_is_restored(tmp_path, monkeypatch):
+    import os
+
+    monkeypatch.setenv("OMP_NUM_THREADS", "7")
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    (tmp_path / "in").mkdir()
+    items = run_batch([tmp_path / "in"], tmp_path / "out", _thread_env, workers=1, progress=False)
+    assert items[0].result == {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    assert os.environ["OMP_NUM_THREADS"] == "7" and "OPENBLAS_NUM_THREADS" not in os.environ
+    doc = json.loads((tmp_path / "out" / "in" / "status.json").read_text())
+    assert doc["started_unix_s"] <= doc["finished_unix_s"]
