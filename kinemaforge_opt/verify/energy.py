@@ -53,21 +53,65 @@ def _integral(t: np.ndarray, power: np.ndarray) -> float:
     return float(np.sum(0.5 * (power[1:] + power[:-1]) * np.diff(t)))
 
 
-def energy_residual(model: ArticulatedModel, recording: Recording) -> float:
+STOP_TOLERANCE = 0.01
+"""A joint counts as on a position stop within this fraction of its range (upper − lower) of
+either limit (or beyond it).  Dimensionless, the same for every joint; 0 would miss a stop that a
+spline through coarse samples approaches without reaching."""
+
+
+def at_stop(model: ArticulatedModel, q: np.ndarray, tolerance: float = STOP_TOLERANCE) -> np.ndarray:
+    """(T,) True where any movable joint of ``model`` with finite position limits is within
+    ``tolerance`` × its range of a limit, or past it, at the states ``q`` (T, n) [rad or m]."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    out = np.zeros(len(q), dtype=bool)
+    for k, j in enumerate(model.movable_joints):
+        lim = j.limits
+        if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
+            continue
+        margin = tolerance * (lim.upper - lim.lower)
+        out |= (q[:, k] <= lim.lower + margin) | (q[:, k] >= lim.upper - margin)
+    return out
+
+
+def free_segments(model: ArticulatedModel, q: np.ndarray, tolerance: float = STOP_TOLERANCE) -> list[tuple[int, int]]:
+    """Maximal runs [a, b] (sample indices, b > a) of the samples ``q`` (T, n) whose every interval
+    has both ends off the stops (:func:`at_stop`): the spans the energy books cover."""
+    stop = at_stop(model, q, tolerance)
+    free = ~(stop[1:] | stop[:-1])  # interval i: samples i -> i + 1
+    out, i = [], 0
+    while i < free.size:
+        if free[i]:
+            k = i
+            while k < free.size and free[k]:
+                k += 1
+            out.append((i, k))
+            i = k
+        else:
+            i += 1
+    return out
+
+
+def energy_residual(model: ArticulatedModel, recording: Recording, stop_tolerance: float = STOP_TOLERANCE) -> float:
     """Dimensionless energy-balance residual of ``recording`` under ``model``.
 
     With E the mechanical energy above, P_app = τ·v the applied power and
-    P_dis = −Σ_j (b_j v_j² + f_j |v_j|) the power of viscous damping and Coulomb friction,
+    P_dis = −Σ_j (b_j v_j² + f_j |v_j|) the power of viscous damping and Coulomb friction, over
+    the stop-free segments s = [a_s, b_s] of the recording (:func:`free_segments`),
 
-        r = |ΔE − W_app − W_dis| / S,
-        ΔE = E(t_end) − E(t_0),  W_app = ∫ P_app dt,  W_dis = ∫ P_dis dt  (trapezoid rule),
-        S = max(|ΔE|, ∫|P_app| dt, ∫|P_dis| dt, max_t E_kin(t) − min_t E_kin(t)).
+        r = Σ_s |ΔE_s − W_app,s − W_dis,s| / S,
+        ΔE_s = E(t_b) − E(t_a),  W_·,s = ∫_s P_· dt  (trapezoid rule),
+        S = max(Σ_s |ΔE_s|, Σ_s ∫_s |P_app| dt, Σ_s ∫_s |P_dis| dt, max_s (max_s E_kin − min_s E_kin)).
 
-    The last term of S normalises a conservative motion (ΔE = W = 0) by the kinetic energy it
-    exchanges.  r = 0 for a perfectly consistent model and data; r is 0 if nothing moves (S = 0).
-    Velocities come from the recording, or from finite differences of q when it has none;
-    τ is taken as zero when the recording has no ``tau`` columns.  Joints of the model missing
-    from the recording raise :class:`DataError`.
+    Why segments: a position stop of the model (its joint limits; Drake enforces them) does work
+    the books above do not hold — a door that hits its stop loses most of its kinetic energy
+    there.  Counting that loss made the residual of the *true* model on MuJoCo's own 120 Hz record
+    0.10 (a door or drawer that hits its stop once) to 1.0 (a laptop lid falling onto its stop);
+    over the stop-free segments it is below 1e-4 and 0.005.  The last term of S normalises a
+    conservative motion (ΔE = W = 0) by the kinetic energy it exchanges.  r = 0 for a perfectly
+    consistent model and data; r is 0 if nothing moves (S = 0); NaN when no interval is free of
+    the stops (nothing to check).  Velocities come from the recording, or from finite
+    differences of q when it has none; τ is taken as zero when the recording has no ``tau``
+    columns.  Joints of the model missing from the recording raise :class:`DataError`.
     """
     rec = model_ordered(model, recording)
     v = recorded_velocity(rec)
@@ -79,12 +123,22 @@ def energy_residual(model: ArticulatedModel, recording: Recording) -> float:
     f = np.array([d.coulomb for d in dyn])
     p_app = np.sum(tau * v, axis=1)
     p_dis = -(v**2 @ b + np.abs(v) @ f)
-    dE = float(E[-1] - E[0])
-    W_app, W_dis = _integral(rec.t, p_app), _integral(rec.t, p_dis)
-    scale = max(abs(dE), _integral(rec.t, np.abs(p_app)), _integral(rec.t, np.abs(p_dis)), float(np.ptp(E_kin)))
+    segments = free_segments(model, rec.q, stop_tolerance)
+    if not segments:
+        return float("nan")
+    num = dE_abs = W_app_abs = W_dis_abs = ek_span = 0.0
+    for a, z in segments:
+        s = slice(a, z + 1)
+        dE = float(E[z] - E[a])
+        num += abs(dE - _integral(rec.t[s], p_app[s]) - _integral(rec.t[s], p_dis[s]))
+        dE_abs += abs(dE)
+        W_app_abs += _integral(rec.t[s], np.abs(p_app[s]))
+        W_dis_abs += _integral(rec.t[s], np.abs(p_dis[s]))
+        ek_span = max(ek_span, float(np.ptp(E_kin[s])))
+    scale = max(dE_abs, W_app_abs, W_dis_abs, ek_span)
     if scale <= 0.0:
         return 0.0
-    return abs(dE - W_app - W_dis) / scale
+    return num / scale
 
 
 def model_ordered(model: ArticulatedModel, recording: Recording) -> Recording:

@@ -16,7 +16,9 @@ motion the reconstruction measured:
    motion is its last pose held and the replay keeps the last τ: the drift then says whether the
    model comes to rest where the real object did, the only observation there is;
 4. the energy residual of the measured motion under the model (:func:`.energy.energy_residual`),
-   evaluated at the force's rate on a cubic spline of the measured q (:func:`fine_motion`).
+   evaluated at the force's rate on a cubic spline of the measured q (:func:`fine_motion`), over
+   the spans where no joint is on one of the model's stops (``energy_books_share``: their share
+   of the recording; a stop's impact work is not in the books).
 
 Outputs in OUT: ``recording.csv`` (the joint-space recording, so ``diagnose`` and ``view`` can use
 it), ``replay.csv`` (the Drake replay, same time base, up to the longest horizon), ``tracks.csv``
@@ -42,7 +44,7 @@ from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks, read_tracks, write_tracks
 from ..model import ArticulatedModel, read_urdf
 from .drift import DEFAULT_HORIZONS_S, DriftReport, drift, fit_initial_velocity
-from .energy import energy_residual
+from .energy import energy_residual, free_segments
 from .forcing import JointRecording, joint_recording
 from .plot import plot_trajectories
 
@@ -143,9 +145,14 @@ def replay_check(model: ArticulatedModel, jr: JointRecording, horizons_s=DEFAULT
     rec = jr.recording
     v0 = fit_initial_velocity(model, rec, jr.forcing, discrete=discrete)
     report = drift(model, rec, horizons_s, discrete=discrete, forcing=jr.forcing, v0=v0)
+    fine = fine_motion(jr)
+    residual = energy_residual(model, fine)
+    books = sum(fine.t[b] - fine.t[a] for a, b in free_segments(model, fine.q))
     return {
         "drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
-        "energy_residual": float(energy_residual(model, fine_motion(jr))),
+        # None: the motion never leaves the model's stops, so no span has energy books to check
+        "energy_residual": None if np.isnan(residual) else float(residual),
+        "energy_books_share": float(books / max(fine.t[-1] - fine.t[0], 1e-12)),
         "drift_definition": DRIFT_DEFINITION,
         "beyond_recording": {_key(h): bool(b) for h, b in zip(report.horizons_s, report.beyond_recording)},
         "max_drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.max_drift_m)},
