@@ -60,24 +60,49 @@ spline through coarse samples approaches without reaching."""
 
 
 def at_stop(model: ArticulatedModel, q: np.ndarray, tolerance: float = STOP_TOLERANCE) -> np.ndarray:
-    """(T,) True where any movable joint of ``model`` with finite position limits is within
+    """(T, n) True where a movable joint of ``model`` with finite position limits is within
     ``tolerance`` × its range of a limit, or past it, at the states ``q`` (T, n) [rad or m]."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
-    out = np.zeros(len(q), dtype=bool)
+    out = np.zeros(q.shape, dtype=bool)
     for k, j in enumerate(model.movable_joints):
         lim = j.limits
         if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
             continue
         margin = tolerance * (lim.upper - lim.lower)
-        out |= (q[:, k] <= lim.lower + margin) | (q[:, k] >= lim.upper - margin)
+        out[:, k] = (q[:, k] <= lim.lower + margin) | (q[:, k] >= lim.upper - margin)
     return out
 
 
-def free_segments(model: ArticulatedModel, q: np.ndarray, tolerance: float = STOP_TOLERANCE) -> list[tuple[int, int]]:
-    """Maximal runs [a, b] (sample indices, b > a) of the samples ``q`` (T, n) whose every interval
-    has both ends off the stops (:func:`at_stop`): the spans the energy books cover."""
+def joint_kinetic_energy(model: ArticulatedModel, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(T, n) ½ M_jj(q) v_j² [J]: the kinetic energy of motion along each joint alone (what an
+    impact on that joint's stop can take out, at most, when the others do not move)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    v = np.atleast_2d(np.asarray(v, dtype=float))
+    pm = build_pin_model(model)
+    data = pm.createData()
+    diag = np.array([np.diag(pin.crba(pm, data, qi)) for qi in q]).reshape(q.shape)
+    return 0.5 * diag * v**2
+
+
+def free_segments(model: ArticulatedModel, q: np.ndarray, v: np.ndarray | None = None,
+                  tolerance: float = STOP_TOLERANCE) -> list[tuple[int, int]]:
+    """Maximal runs [a, b] (sample indices, b > a) of the samples ``q``, ``v`` (T, n) in which no
+    interval may hold a stop's impact: an interval is out when, at either of its ends, a joint is
+    on a stop (:func:`at_stop`) while moving along it with more than ``tolerance`` × the motion's
+    kinetic-energy span (max − min over the samples; :func:`joint_kinetic_energy`), or strictly
+    past a limit (a compliant stop pressed in stores energy).  A joint that rests on its stop (a
+    closed door while the other one swings) takes no work from it.  Without
+    ``v``, finite differences of q."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
     stop = at_stop(model, q, tolerance)
-    free = ~(stop[1:] | stop[:-1])  # interval i: samples i -> i + 1
+    past = at_stop(model, q, -1e-6)  # beyond a limit (by more than numerical jitter)
+    if stop.any():
+        v = np.gradient(q, axis=0) if v is None else np.atleast_2d(np.asarray(v, dtype=float))
+        ek = joint_kinetic_energy(model, q, v)
+        span = float(np.ptp(ek.sum(axis=1))) if len(q) > 1 else 0.0
+        stop &= ek > tolerance * span
+    hit = (stop | past).any(axis=1)
+    free = ~(hit[1:] | hit[:-1])  # interval i: samples i -> i + 1
     out, i = [], 0
     while i < free.size:
         if free[i]:
@@ -123,7 +148,7 @@ def energy_residual(model: ArticulatedModel, recording: Recording, stop_toleranc
     f = np.array([d.coulomb for d in dyn])
     p_app = np.sum(tau * v, axis=1)
     p_dis = -(v**2 @ b + np.abs(v) @ f)
-    segments = free_segments(model, rec.q, stop_tolerance)
+    segments = free_segments(model, rec.q, v, stop_tolerance)
     if not segments:
         return float("nan")
     num = dE_abs = W_app_abs = W_dis_abs = ek_span = 0.0

@@ -147,7 +147,7 @@ def replay_check(model: ArticulatedModel, jr: JointRecording, horizons_s=DEFAULT
     report = drift(model, rec, horizons_s, discrete=discrete, forcing=jr.forcing, v0=v0)
     fine = fine_motion(jr)
     residual = energy_residual(model, fine)
-    books = sum(fine.t[b] - fine.t[a] for a, b in free_segments(model, fine.q))
+    books = sum(fine.t[b] - fine.t[a] for a, b in free_segments(model, fine.q, fine.v))
     return {
         "drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
         # None: the motion never leaves the model's stops, so no span has energy books to check
