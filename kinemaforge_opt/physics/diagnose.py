@@ -66,6 +66,12 @@ STATE_WINDOW_S = 0.3
 # of this length [s] (each from its own state over its first STATE_WINDOW_S).
 SIMULATION_CHECK_S = 1.0
 
+# The hypothesis search runs on block means of the recording at no less than this rate [Hz]:
+# the effects of the library are low-bandwidth forces, so a recording sampled faster carries no
+# more about them than its block means (whose noise falls as 1/sqrt(block)), at a fraction of the
+# cost; the nominal and the selected model are then fitted at the full rate.
+SEARCH_RATE_HZ = 30.0
+
 # Effect types tested, in order; the parameters freed for each are its EFFECTS[type].params
 # (first = reported value).
 CANDIDATES: tuple[str, ...] = (
@@ -152,6 +158,25 @@ class Diagnosis:
                              "effect library cannot express — so effects were accepted only if they also predicted the "
                              "held-out span better: that span is not independent here)")
         return "\n".join(lines)
+
+
+def search_decimation(rec: Recording) -> int:
+    """Samples per block of the search grid: the largest k whose block means are still sampled
+    at SEARCH_RATE_HZ or more (1 for a recording at or below it)."""
+    return max(1, int(np.floor((1.0 / rec.dt) / SEARCH_RATE_HZ + 1e-6)))
+
+
+def block_average(rec: Recording, k: int) -> Recording:
+    """``rec`` as means over consecutive blocks of ``k`` samples (t, q, v and tau alike; a last
+    incomplete block is dropped).  k = 1 returns ``rec`` itself."""
+    if k <= 1:
+        return rec
+    T = (rec.t.size // k) * k
+
+    def mean(a):
+        return None if a is None else a[:T].reshape(T // k, k, *a.shape[1:]).mean(axis=1)
+
+    return Recording(mean(rec.t), rec.joint_names, mean(rec.q), mean(rec.v), mean(rec.tau))
 
 
 def _free_for(model: ArticulatedModel, joint: str, effect: str) -> list[str]:
@@ -327,7 +352,7 @@ def _at_bound_values(trial: Trial, names: list[str], nominal_z: dict) -> bool:
 
 
 def _calibration(model: ArticulatedModel, rec: Recording, trial: Trial, effects: list[tuple[str, str]],
-                 stops: dict, segment_s: float | None, sigma_q: np.ndarray) -> Calibration:
+                 stops: dict, segment_s: float | None, sigma_q: np.ndarray, eps: np.ndarray | None = None) -> Calibration:
     """A :class:`Calibration` of ``model`` with the parameters of ``effects`` at the values of
     ``trial`` (95 % intervals from the fit's sensitivity)."""
     from ..calibration import _result
@@ -335,7 +360,7 @@ def _calibration(model: ArticulatedModel, rec: Recording, trial: Trial, effects:
 
     names = [n for j, e in effects for n in _free_for(model, j, e)]
     fit = build_joint_space_fit(model, rec, names, energy="off", segment_s=segment_s, limit_stops=stops,
-                                sigma_q=sigma_q)
+                                sigma_q=sigma_q, friction_eps=eps)
     z = np.concatenate([trial.z[b.name] for b in fit.blocks]) if fit.blocks else np.zeros(0)
     res = Result(trial.success, trial.status, trial.iterations, float("nan"), {}, {}, {}, trial.solve_time_s)
     return _result(fit, res, trial.X, z, trial.solve_time_s)
@@ -381,30 +406,35 @@ def diagnose(
     fit_rec = rec.window(rec.t[0], rec.t[split - 1])
     held = rec.window(rec.t[split], rec.t[-1]) if split < rec.t.size - 3 else None
     sigma_q = noise_std(fit_rec.q)
+    # The hypothesis search runs on a coarser copy of the fit span (effects are low-bandwidth):
+    # block means at SEARCH_RATE_HZ or more, with their own noise level; only the nominal and
+    # the final model are fitted at the full rate.
+    k_dec = search_decimation(fit_rec)
+    srch = block_average(fit_rec, k_dec)
+    sigma_s = noise_std(srch.q) if k_dec == 1 else np.maximum(noise_std(srch.q), sigma_q / np.sqrt(k_dec))
+    eps = friction_smoothing(srch)
 
-    say("fitting the nominal model")
-    stops = limit_stop_guess(model, fit_rec)
+    say("fitting the nominal model" if k_dec == 1 else
+        f"fitting the nominal model ({1 / srch.dt:.0f} Hz search grid, {k_dec}-sample block means)")
+    stops = limit_stop_guess(model, srch)
     hyps = [(j, e) for j in model.joint_names for e in candidates if e != "axis_tilt"]
-    search = {"base": HypothesisFit(model, fit_rec, hyps, segment_s, stops, CANDIDATE_MAX_ITER, sigma_q)}
+    search = {"base": HypothesisFit(model, srch, hyps, segment_s, stops, CANDIDATE_MAX_ITER, sigma_s, eps)}
 
     def fit_for(effects_: list[tuple[str, str]]) -> HypothesisFit:
         if not any(e == "axis_tilt" for _, e in effects_):
             return search["base"]
         if "axis" not in search:  # the symbolic axis makes every evaluation ~10x dearer: build on demand
-            search["axis"] = HypothesisFit(model, fit_rec, hyps + [(j, "axis_tilt") for j in model.joint_names
+            search["axis"] = HypothesisFit(model, srch, hyps + [(j, "axis_tilt") for j in model.joint_names
                                                                    if "axis_tilt" in candidates],
-                                           segment_s, stops, CANDIDATE_MAX_ITER, sigma_q)
+                                           segment_s, stops, CANDIDATE_MAX_ITER, sigma_s, eps)
         return search["axis"]
 
     nominal_trial = search["base"].solve([])
     nominal_z = {n: search["base"].nominal_z(n) for n in search["base"].blocks}
-    nominal = _calibration(model, fit_rec, nominal_trial, [], stops, segment_s, sigma_q)
-    mismatch = locate(model, fit_rec, nominal.q_fit, sigma_q)
-    v_scale = np.sqrt(np.mean(velocity_estimate(fit_rec) ** 2, axis=0))
+    v_scale = np.sqrt(np.mean(velocity_estimate(srch) ** 2, axis=0))
 
     r_nom, q_s, v_s, a_s = inverse_dynamics_residual(model, fit_rec)  # the missing generalised force
     id_force = _id_force(model, q_s, v_s, a_s)
-    eps = friction_smoothing(fit_rec)
 
     def trial_of(selected_: list[tuple[str, str]], start: Trial) -> Trial:
         names = [n for j, e in selected_ for n in _free_for(model, j, e)]
@@ -425,16 +455,16 @@ def diagnose(
                 bounds[f"{j}.v_stribeck"] = (float(b.lower[0]), 0.5 * float(np.max(np.abs(v_s[:, k]))))
             if e == "limit_contact":  # start in contact, 5 % of the range before the extreme, with a stiffness
                 # whose force over that penetration is the recording's force scale
-                span = float(np.ptp(fit_rec.q[:, k]))
+                span = float(np.ptp(srch.q[:, k]))
                 # A stop is identifiable only if the recording both moves free of it and touches
                 # it: keep it inside the half of the recorded range on its side (else a "stop"
                 # beyond all the data is just a spring).
-                lo, hi = float(fit_rec.q[:, k].min()), float(fit_rec.q[:, k].max())
+                lo, hi = float(srch.q[:, k].min()), float(srch.q[:, k].max())
                 bounds[f"{j}.limit_stop"] = (lo + 0.5 * span, hi) if stops[j][0] > 0 else (lo, hi - 0.5 * span)
                 if carried:
                     continue
                 init[f"{j}.limit_stop"] = np.array([stops[j][1] - stops[j][0] * 0.05 * span])
-                init[f"{j}.limit_stiffness"] = fit_for([(j, e)]).blocks[f"{j}.limit_stiffness"].scale * 0.01 * float(np.std(fit_rec.q[:, k])) / (0.05 * span)
+                init[f"{j}.limit_stiffness"] = fit_for([(j, e)]).blocks[f"{j}.limit_stiffness"].scale * 0.01 * float(np.std(srch.q[:, k])) / (0.05 * span)
         # States start from the recording, not the parent's trajectory: an effect can act where the
         # data went but the parent's fit did not (a stop), and a parent trajectory can hold a new
         # coefficient in a poor basin (dry friction).
@@ -444,7 +474,7 @@ def diagnose(
             # Dry friction and stops make the fit multimodal: a second start from the
             # inverse-dynamics estimate of the new coefficients; the better fit is kept.
             other = hf.solve(names, start=start, init={**init, **coefficient}, states_from_data=True, bounds=bounds)
-            if other.success and (not trial.success or _rss_q(other.q_fit, fit_rec.q, sigma_q) < _rss_q(trial.q_fit, fit_rec.q, sigma_q)):
+            if other.success and (not trial.success or _rss_q(other.q_fit, srch.q, sigma_s) < _rss_q(trial.q_fit, srch.q, sigma_s)):
                 trial = other
         return trial
 
@@ -452,10 +482,10 @@ def diagnose(
     equivalents: dict[tuple[str, str], list[dict]] = {}
     tested: list[dict] = []
     current = nominal_trial
-    n_res = fit_rec.q.size
+    n_res = srch.q.size
     judged_by_held_out = False
     for _ in range(max_effects):
-        rss0 = _rss_q(current.q_fit, fit_rec.q, sigma_q)
+        rss0 = _rss_q(current.q_fit, srch.q, sigma_s)
         rows = []
         pending = [(j, e) for j in model.joint_names for e in candidates if not any(s[:2] == (j, e) for s in selected)]
         if screen is not None and len(pending) > screen:
@@ -467,11 +497,11 @@ def diagnose(
             say(f"testing {effect} on {joint}")
             trial = trial_of([s[:2] for s in selected] + [(joint, effect)], current)
             names = _free_for(model, joint, effect)
-            size = float(np.sqrt(np.mean(((trial.q_fit - current.q_fit) / sigma_q) ** 2)))
+            size = float(np.sqrt(np.mean(((trial.q_fit - current.q_fit) / sigma_s) ** 2)))
             supported = trial.success and not _at_bound_values(trial, names, nominal_z)
             rows.append({"joint": joint, "type": effect, "trial": trial, "k": _n_params(names),
                          "value": _reported_value(model, joint, effect, trial.values),
-                         "rss": _rss_q(trial.q_fit, fit_rec.q, sigma_q), "effect_size_sigma": size,
+                         "rss": _rss_q(trial.q_fit, srch.q, sigma_s), "effect_size_sigma": size,
                          "supported": supported})
         if not rows:
             break
@@ -479,7 +509,7 @@ def diagnose(
         # from the residuals of the round's best-fitting supported hypothesis.
         pool = [r for r in rows if r["supported"]] or rows
         best_fit = min(pool, key=lambda r: r["rss"])
-        n_eff = effective_count((best_fit["trial"].q_fit - fit_rec.q) / sigma_q) if EFFECTIVE_N else float(n_res)
+        n_eff = effective_count((best_fit["trial"].q_fit - srch.q) / sigma_s) if EFFECTIVE_N else float(n_res)
         # An effect must move the fit by more than the noise, and by more than what the round's
         # best hypothesis still leaves unexplained (the noise floor the data and library reach:
         # the high-frequency noise estimate can be low).
@@ -522,7 +552,7 @@ def diagnose(
                     names = _free_for(model, joint, effect)
                     if not trial.success or _at_bound_values(trial, names, nominal_z):
                         continue
-                    gain = n_res * np.log(_rss_q(trial.q_fit, fit_rec.q, sigma_q) / _rss_q(current.q_fit, fit_rec.q, sigma_q)) \
+                    gain = n_res * np.log(_rss_q(trial.q_fit, srch.q, sigma_s) / _rss_q(current.q_fit, srch.q, sigma_s)) \
                         + (_n_params(names) - k_old) * np.log(n_res)
                     if gain < DELTA_BIC and (swap is None or gain < swap[0]):
                         swap = (gain, joint, effect, trial)
@@ -542,7 +572,7 @@ def diagnose(
             if keep and not trial.success:
                 continue
             k_old = _n_params(_free_for(model, *selected[i][:2]))
-            cost = n_res * np.log(_rss_q(current.q_fit, fit_rec.q, sigma_q) / _rss_q(trial.q_fit, fit_rec.q, sigma_q)) \
+            cost = n_res * np.log(_rss_q(current.q_fit, srch.q, sigma_s) / _rss_q(trial.q_fit, srch.q, sigma_s)) \
                 + k_old * np.log(n_res)  # BIC(with) - BIC(without)
             if cost >= DELTA_BIC:
                 tested.append({"removed": f"{selected[i][1]} on {selected[i][0]}", "delta_bic": float(cost)})
@@ -576,11 +606,11 @@ def diagnose(
     # open-loop replays of many seconds diverge for any model); if it does not, effects are
     # dropped, last selected first, until it does (or none is left).  Limit contact is judged by
     # the fit alone: it is not part of an ArticulatedModel, so the simulation cannot show it.
-    drop_until_better(fit_rec, segment_s or SIMULATION_CHECK_S,
+    drop_until_better(srch, segment_s or SIMULATION_CHECK_S,
                       [k for k, x in enumerate(selected) if x[1] != "limit_contact"],
                       "simulation_check", "fit_span_simulated_rms", "simulating the fit span with {n} effect(s)")
 
-    floor_final = float(np.sqrt(_rss_q(current.q_fit, fit_rec.q, sigma_q) / n_res))
+    floor_final = float(np.sqrt(_rss_q(current.q_fit, srch.q, sigma_s) / n_res))
     if selected and floor_final > THRESHOLD_SIGMA and held is not None:
         # Even with every selected effect the fit stays above the located-mismatch level: the
         # output error is dominated by model-form error the library cannot express, and its
@@ -591,8 +621,23 @@ def diagnose(
         drop_until_better(held, segment_s, list(range(len(selected))), "held_out_check", "held_out_rms",
                           "checking {n} effect(s) on the held-out span")
 
-    say("re-fitting with the selected effects")
-    final = _calibration(model, fit_rec, current, [s[:2] for s in selected], stops, segment_s, sigma_q)
+    say("re-fitting with the selected effects" + ("" if k_dec == 1 else f" at the full {1 / fit_rec.dt:.0f} Hz"))
+    chosen = [s[:2] for s in selected]
+    if k_dec == 1:
+        nominal = _calibration(model, fit_rec, nominal_trial, [], stops, segment_s, sigma_q, eps)
+        final = _calibration(model, fit_rec, current, chosen, stops, segment_s, sigma_q, eps)
+    else:
+        # One fit at the full rate holding the selected effects: the nominal model (effects fixed
+        # out) and the selected model, each started from its search-grid solution.
+        full = HypothesisFit(model, fit_rec, chosen, segment_s, stops, CANDIDATE_MAX_ITER, sigma_q, eps)
+        t_s = search["base"].t_grid
+        nominal_full = full.solve([], x0=full.states_from(t_s, nominal_trial.X))
+        names = [n for j, e in chosen for n in _free_for(model, j, e)]
+        final_full = full.solve(names, init={n: current.values[n] for n in names}, bounds=current.bounds,
+                                x0=full.states_from(t_s, current.X)) if chosen else nominal_full
+        nominal = _calibration(model, fit_rec, nominal_full, [], stops, segment_s, sigma_q, eps)
+        final = _calibration(model, fit_rec, final_full, chosen, stops, segment_s, sigma_q, eps)
+    mismatch = locate(model, fit_rec, nominal.q_fit, sigma_q)
     found = []
     for joint, effect, d in selected:
         names = _free_for(model, joint, effect)

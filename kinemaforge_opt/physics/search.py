@@ -243,13 +243,14 @@ class HypothesisFit:
     """The shared fit of ``recording`` for the (joint, effect) pairs in ``hypotheses``.
 
     Build once (``__init__``), then :meth:`solve` any subset of their parameters.
-    limit_stops: per joint (side, initial stop) for ``limit_contact`` (see
-    :func:`kinemaforge_opt.nlp.joint_space.build_joint_space_fit`).
+    limit_stops: per joint (side, initial stop) for ``limit_contact``, sigma_q (n,) the encoder
+    noise and friction_eps (n,) the smooth-sign width [rad/s or m/s] (defaults: from the
+    recording; see :func:`kinemaforge_opt.nlp.joint_space.build_joint_space_fit`).
     """
 
     def __init__(self, model: ArticulatedModel, recording: Recording, hypotheses: list[tuple[str, str]],
                  segment_s: float | None = None, limit_stops: dict | None = None, max_iter: int = 100,
-                 sigma_q: np.ndarray | None = None):
+                 sigma_q: np.ndarray | None = None, friction_eps: np.ndarray | None = None):
         names: list[str] = []
         for joint, effect in hypotheses:
             for n in effect_parameters(model, joint, effect):
@@ -258,7 +259,7 @@ class HypothesisFit:
         self.model = model
         self.names = tuple(names)
         self.fit = build_joint_space_fit(model, recording, self.names, energy="off", segment_s=segment_s,
-                                         limit_stops=limit_stops, sigma_q=sigma_q)
+                                         limit_stops=limit_stops, sigma_q=sigma_q, friction_eps=friction_eps)
         self.blocks = {b.name: b for b in self.fit.blocks}
         self.nlp = _StructuredNLP(self.fit, max_iter)
         self.recording = self.fit.recording
@@ -268,6 +269,19 @@ class HypothesisFit:
         t_grid = np.concatenate([np.linspace(a, b, self.fit.substeps + 1)[:-1] for a, b in zip(rec.t[:-1], rec.t[1:])] + [rec.t[-1:]])
         self.x_init = np.vstack([np.array([np.interp(t_grid, rec.t, c) for c in rec.q.T]),
                                  np.array([np.interp(t_grid, rec.t, c) for c in v0.T])])
+        self.t_grid = t_grid
+
+    def states_from(self, t_src: np.ndarray, X_src: np.ndarray) -> np.ndarray:
+        """(2n, G) states on this fit's grid from states ``X_src`` (2n, S) at times ``t_src`` (S,)
+        [s] of another fit of the same motion (e.g. on a coarser grid): q by cubic Hermite
+        interpolation with v as its derivative (the collocation polynomial), v linearly;
+        extrapolated at the ends."""
+        from scipy.interpolate import CubicHermiteSpline
+
+        n = self.model.nq
+        q = CubicHermiteSpline(t_src, X_src[:n].T, X_src[n:].T, axis=0, extrapolate=True)(self.t_grid).T
+        v = np.array([np.interp(self.t_grid, t_src, c) for c in X_src[n:]])
+        return np.vstack([q, v])
 
     def nominal_z(self, name: str) -> np.ndarray:
         b = self.blocks[name]
@@ -275,12 +289,14 @@ class HypothesisFit:
 
     def solve(self, free: list[str] | tuple[str, ...], start: Trial | None = None,
               init: dict[str, np.ndarray] | None = None, states_from_data: bool = False,
-              bounds: dict[str, tuple[float, float]] | None = None) -> Trial:
+              bounds: dict[str, tuple[float, float]] | None = None, x0: np.ndarray | None = None) -> Trial:
         """Fit the hypothesis whose free parameters are ``free`` (the others fixed at nominal),
         starting from ``start`` (its states and shared parameters) and physical ``init`` values.
         states_from_data: start the states from the recording instead of ``start``'s trajectory
         (for effects that act only where the recording went but the parent's fit did not).
-        bounds: physical (lower, upper) replacing a free block's bounds."""
+        bounds: physical (lower, upper) replacing a free block's bounds.  x0: (2n, G) starting
+        states on this fit's collocation grid (e.g. a coarser fit's trajectory interpolated);
+        overrides ``start`` and ``states_from_data``."""
         free = tuple(free)
         unknown = [n for n in free if n not in self.blocks]
         if unknown:
@@ -290,6 +306,8 @@ class HypothesisFit:
         nlp = self.nlp
         nxG = nlp.nx * nlp.G
         X0 = start.X if start is not None and not states_from_data else self.x_init
+        if x0 is not None:
+            X0 = np.asarray(x0, float).reshape(nlp.nx, nlp.G)
         w0 = np.concatenate([X0.ravel(order="F"), np.zeros(nlp.nz)])
         lbw = np.concatenate([np.full(nxG, -np.inf), np.zeros(nlp.nz)])
         ubw = np.concatenate([np.full(nxG, np.inf), np.zeros(nlp.nz)])
