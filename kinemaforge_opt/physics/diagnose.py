@@ -758,11 +758,24 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
     q0, v0, _ = smooth_derivatives(rec)
     tau = rec.tau if rec.tau is not None else np.zeros((rec.t.size, n))
 
+    # Per joint, its passive force terms (the model's joint dynamics, then the extra law), looked
+    # up once: the right-hand side runs ~10^4 times per simulated second.
+    from .effects import EFFECTS, dynamics_effects
+
+    terms = [[(EFFECTS[e].force, tuple(getattr(j.dynamics, p) for p in EFFECTS[e].params))
+              for e in dynamics_effects(j.dynamics)] for j in joints]
+    t_rec, last = rec.t, rec.t.size - 1
+
     def rhs(t, x):
         q, v = x[:n], x[n:]
-        u = np.array([np.interp(t, rec.t, tau[:, k]) for k in range(n)])
-        u += [j.dynamics.passive_force(q[k], v[k]) + (f(q[k], v[k]) if f else 0.0)
-              for k, (j, f) in enumerate(zip(joints, laws))]
+        i = min(max(int(np.searchsorted(t_rec, t)) - 1, 0), last - 1)  # tau linear between samples
+        w = min(max((t - t_rec[i]) / (t_rec[i + 1] - t_rec[i]), 0.0), 1.0)
+        u = (1 - w) * tau[i] + w * tau[i + 1]
+        for k in range(n):
+            for force, params in terms[k]:
+                u[k] += force(q[k], v[k], *params)
+            if laws[k] is not None:
+                u[k] += laws[k](q[k], v[k])
         return np.concatenate([v, pin.aba(pm, pd, q, v, u)])
 
     def run(x0: np.ndarray, t_eval: np.ndarray) -> np.ndarray:
