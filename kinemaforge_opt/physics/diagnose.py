@@ -72,6 +72,11 @@ SIMULATION_CHECK_S = 1.0
 # cost; the nominal and the selected model are then fitted at the full rate.
 SEARCH_RATE_HZ = 30.0
 
+# Per selection round (and per swap), only this many hypotheses get an NLP fit: those that best
+# reduce the inverse-dynamics residual force in a linear least-squares pre-screen (a ranking, not
+# evidence: the NLP fit and its ΔBIC still decide).
+SCREEN = 5
+
 # Effect types tested, in order; the parameters freed for each are its EFFECTS[type].params
 # (first = reported value).
 CANDIDATES: tuple[str, ...] = (
@@ -380,7 +385,7 @@ def diagnose(
     progress=None,
     segment_s: float | None = None,
     other_recordings: tuple[Recording, ...] = (),
-    screen: int | None = None,
+    screen: int | None = SCREEN,
 ) -> Diagnosis:
     """Locate, explain, model and show the mismatch between ``model`` and ``recording``.
 
@@ -392,7 +397,8 @@ def diagnose(
     recordings.  other_recordings: further recordings of the same system, used only to compare
     predictions before vs after (``Diagnosis.held_out_others``).  screen: per selection round,
     fit only this many hypotheses by NLP, those that best reduce the inverse-dynamics residual
-    in a linear least-squares pre-screen (None: fit every hypothesis).
+    in a linear least-squares pre-screen (default ``SCREEN``; None: fit every hypothesis); the
+    same ranking picks the candidates tried in place of an earlier effect.
     """
     say = progress or (lambda s: None)
     rec = match_recording(model, recording)
@@ -543,19 +549,21 @@ def diagnose(
             keep = [x[:2] for k, x in enumerate(selected) if k != i]
             k_old = _n_params(_free_for(model, *selected[i][:2]))
             swap = None
-            for joint in model.joint_names:
-                for effect in candidates:
-                    if (joint, effect) in keep or (joint, effect) == selected[i][:2]:
-                        continue
-                    say(f"testing {effect} on {joint} in place of {selected[i][1]}")
-                    trial = trial_of(keep + [(joint, effect)], current)
-                    names = _free_for(model, joint, effect)
-                    if not trial.success or _at_bound_values(trial, names, nominal_z):
-                        continue
-                    gain = n_res * np.log(_rss_q(trial.q_fit, srch.q, sigma_s) / _rss_q(current.q_fit, srch.q, sigma_s)) \
-                        + (_n_params(names) - k_old) * np.log(n_res)
-                    if gain < DELTA_BIC and (swap is None or gain < swap[0]):
-                        swap = (gain, joint, effect, trial)
+            others = [(j, e) for j in model.joint_names for e in candidates
+                      if (j, e) not in keep and (j, e) != selected[i][:2]]
+            if screen is not None and len(others) > screen:
+                scores = screen_scores(model, others, keep, r_nom, id_force, q_s, v_s, eps, v_scale, stops)
+                others = sorted(others, key=lambda je: scores[je])[:screen]
+            for joint, effect in others:
+                say(f"testing {effect} on {joint} in place of {selected[i][1]}")
+                trial = trial_of(keep + [(joint, effect)], current)
+                names = _free_for(model, joint, effect)
+                if not trial.success or _at_bound_values(trial, names, nominal_z):
+                    continue
+                gain = n_res * np.log(_rss_q(trial.q_fit, srch.q, sigma_s) / _rss_q(current.q_fit, srch.q, sigma_s)) \
+                    + (_n_params(names) - k_old) * np.log(n_res)
+                if gain < DELTA_BIC and (swap is None or gain < swap[0]):
+                    swap = (gain, joint, effect, trial)
             if swap is not None:
                 gain, joint, effect, trial = swap
                 tested.append({"swap": f"{selected[i][1]} on {selected[i][0]} -> {effect} on {joint}", "delta_bic": float(gain)})
