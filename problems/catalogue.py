@@ -60,6 +60,10 @@ _PAIRS = {
 }
 
 
+# A slow stroke to 15 % of the range, then one to 60 % (3 s push, 1 s free each; 8 s).
+SLOW_PUSH = HandPlan(goals=(0.15, 0.6), push_s=3.0, free_s=1.0, release_speed=0.15)
+
+
 def _effect(kind: str, joint: str, etype: str) -> E:
     value, params = (_DOOR_EFFECTS if kind == "door" else _DRAWER_EFFECTS)[etype]
     return E(etype, joint, value, params)
@@ -84,6 +88,13 @@ def _effect_cases() -> dict[str, Case]:
             effects = (_effect(kind, joint, a), _effect(kind, joint, b))
             name = f"effect_{kind}_{a}+{b}"
             out[name] = Case(name, effects=effects, expected=_expect(effects), **common)
+        # Stribeck friction acts only below a few v_stribeck: the two quick strokes above pass
+        # through that regime in a fraction of a second.  This case pushes slowly first (about
+        # v_stribeck for 3 s), then faster (about 3-4x v_stribeck), so the recording both dwells
+        # where the effect acts and shows that it fades with speed.
+        effects = (_effect(kind, joint, "stribeck_friction"),)
+        name = f"effect_{kind}_stribeck_friction_slow_push"
+        out[name] = Case(name, effects=effects, expected=_expect(effects), plan=SLOW_PUSH, **common)
         out[f"null_{kind}"] = Case(f"null_{kind}", expected=_expect(()), **common)
     out["null_laptop"] = Case("null_laptop", "laptop", 0, views=2, frames=24, width=320, height=240, expected=_expect(()))
     return out

@@ -1,6 +1,7 @@
 """Concealed-effect recordings for the discovery benchmark, made the way ``kinemaforge demo``
 makes its recording: the catalogue case's object and effects simulated in MuJoCo (the
-independent ground truth), one hand stroke that stays inside the joint range, sampled at 30 Hz
+independent ground truth), hand strokes that stay inside the joint range (the case's own plan
+if it has one), sampled at 30 Hz
 with 2 mrad (or 2 mm) Gaussian encoder noise and the hand's generalised force as ``tau``."""
 
 from __future__ import annotations
@@ -38,15 +39,18 @@ def stroke_plan():
 
 
 def effect_recording(case_name: str, noise_seed: int = 0, rate_hz: int = RATE_HZ) -> EffectRecording:
-    """Simulate catalogue case ``case_name`` and return its noisy joint-space recording."""
+    """Simulate catalogue case ``case_name`` and return its noisy joint-space recording.  A case
+    that defines its own hand plan (not the default ``HandPlan()``) is recorded with it, the
+    others with :func:`stroke_plan`."""
     from problems.catalogue import get_case
 
-    from ..synth.groundtruth import simulate
+    from ..synth.groundtruth import HandPlan, simulate
     from ..synth.objects import make_object
 
     case = get_case(case_name)
     obj = make_object(case.category, case.seed)
-    ep = simulate(obj.model, obj.handles, case.effects, plan=stroke_plan(), record_hz=rate_hz)
+    plan = case.plan if case.plan != HandPlan() else stroke_plan()
+    ep = simulate(obj.model, obj.handles, case.effects, plan=plan, record_hz=rate_hz)
     rng = np.random.default_rng(noise_seed)
     q = ep.q + rng.normal(0.0, NOISE, ep.q.shape)
     reached = False

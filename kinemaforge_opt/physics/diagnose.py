@@ -65,6 +65,11 @@ STATE_WINDOW_S = 0.3
 # The selected effects must also simulate the fit span better than the nominal model, in pieces
 # of this length [s] (each from its own state over its first STATE_WINDOW_S).
 SIMULATION_CHECK_S = 1.0
+# Simulations (held-out and fit-span checks): LSODA tolerances (relative, absolute [rad or m]),
+# far below the encoder noise; the starting state's least-squares fit differentiates them with
+# this fixed step in its scaled variables (q [rad or m], v × window [rad or m]).
+SIM_RTOL, SIM_ATOL = 1e-5, 1e-7
+STATE_FIT_STEP = 1e-4
 
 # The hypothesis search runs on block means of the recording at no less than this rate [Hz]:
 # the effects of the library are low-bandwidth forces, so a recording sampled faster carries no
@@ -787,7 +792,7 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
         return np.concatenate([v, pin.aba(pm, pd, q, v, u)])
 
     def run(x0: np.ndarray, t_eval: np.ndarray) -> np.ndarray:
-        sol = solve_ivp(rhs, (t_eval[0], t_eval[-1]), x0, t_eval=t_eval, method="LSODA", rtol=1e-7, atol=1e-9)
+        sol = solve_ivp(rhs, (t_eval[0], t_eval[-1]), x0, t_eval=t_eval, method="LSODA", rtol=SIM_RTOL, atol=SIM_ATOL)
         q = sol.y[:n].T
         if q.shape[0] < t_eval.size:  # integration stopped early: hold the last state
             q = np.vstack([q, np.repeat(q[-1:], t_eval.size - q.shape[0], axis=0)])
@@ -800,7 +805,18 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
         if window.sum() >= max(5, 2 * n + 1) and window.sum() < rec.t.size:
             tw = rec.t[window]
             scale = np.concatenate([np.full(n, 1.0), np.full(n, 1.0 / max(tw[-1] - tw[0], 1e-9))])
-            fit = least_squares(lambda z: (run(z * scale, tw) - rec.q[window]).ravel(), x0 / scale, method="lm")
+
+            def resid(z):
+                return (run(z * scale, tw) - rec.q[window]).ravel()
+
+            def jac(z):
+                # forward differences with a fixed step, far above the integration error (MINPACK's
+                # default relative step, ~1e-8, is below it: the Jacobian was noise and the state
+                # fit landed anywhere)
+                r0 = resid(z)
+                return np.stack([(resid(z + STATE_FIT_STEP * e) - r0) / STATE_FIT_STEP for e in np.eye(z.size)], axis=1)
+
+            fit = least_squares(resid, x0 / scale, jac=jac, method="lm")
             x0 = fit.x * scale
         else:
             window[:] = False

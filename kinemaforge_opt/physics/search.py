@@ -25,6 +25,8 @@ from ..nlp.joint_space import build_joint_space_fit
 from .effects import EFFECTS
 
 EXPAND = True
+# Extra IPOPT options of every hypothesis solve (``"ipopt.<name>": value``).
+IPOPT_OPTIONS: dict = {}
 
 
 def effect_parameters(model: ArticulatedModel, joint: str, effect: str) -> list[str]:
@@ -234,7 +236,7 @@ class _StructuredNLP:
         t_eval = _time.process_time() - t0
         opts = {"ipopt.max_iter": max_iter, "ipopt.tol": tol, "ipopt.print_level": print_level, "print_time": False,
                 "ipopt.sb": "yes", "jac_g": jac_fn, "hess_lag": hess_fn,
-                "ipopt.max_cpu_time": max(1.0, max_iter * t_eval)}
+                "ipopt.max_cpu_time": max(1.0, max_iter * t_eval), **IPOPT_OPTIONS}
         self.solver = ca.nlpsol("hypotheses", "ipopt", {"x": w, "f": f, "g": g}, opts)
         self.fit = fit
 
