@@ -31,6 +31,7 @@ from ..nlp.visual import surface_model
 from ..spatial import inverse, make_transform
 from .change import STATIC
 from .perceive import Perception, perceive
+from .mass import moving_point_masks, part_mass_properties
 from .surface import obj_text, part_surface
 
 BASE, ENVIRONMENT = "base", "environment"
@@ -143,7 +144,10 @@ def closed_form_lines(per: Perception, graph: GraphResult) -> dict[str, JointLin
 def build_model(per: Perception, graph: GraphResult, density: float, name: str = "reconstruction",
                 lines: dict[str, JointLine] | None = None, labels: list[np.ndarray] | None = None):
     """Kinematic tree + fused points -> (ArticulatedModel, joint records, part clouds at zero,
-    meshes, point labels).  Joint records follow the reconstruction.json contract.  ``lines``:
+    meshes, point labels, mass report).  Joint records follow the reconstruction.json contract.
+    Moving links' mass properties come from :func:`.mass.part_mass_properties` on the points
+    that move with the part; the mass report gives per moving link the points kept, the volume
+    model and the mass the whole cloud's hull would have had [kg].  ``lines``:
     the joints as world lines (default: :func:`closed_form_lines`, the graph's closed form).
     ``labels``: :func:`point_labels` when already computed (they do not depend on ``lines``)."""
     tracks, tree = per.tracks, graph.best
@@ -188,17 +192,34 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
             if T_link_world[p][s] is not None:
                 T = T_link_world[p][s]
                 points_link[p].append(c.points[lab == p] @ T[:3, :3].T + T[:3, 3])
+    # mass properties from the points that move with their part (background swept into a part's
+    # label would otherwise weigh as much as the part's hull of air; see perception/mass.py)
+    keep_link: dict[str, np.ndarray | None] = {tree.root: None}
+    clouds_t = [c.points for c in per.clouds]
+    for p, k in reps.items():
+        Ts = [tracks.Ts_world_track(k)[s] if tracks.observed()[k, s] else None for s in range(tracks.times.size)]
+        masks = moving_point_masks([c.points[lab == p] for c, lab in zip(per.clouds, labels)], clouds_t, Ts,
+                                   per.inlier_distance)
+        keep_link[p] = np.concatenate([m for s, m in enumerate(masks) if T_link_world[p][s] is not None])
     links, clouds_world, meshes = [], {}, {}
+    mass_report = {}
     for p in [tree.root] + [j.child for j in tree.joints]:
         pts = np.concatenate(points_link[p])
         surf = part_surface(pts, density, p)
         meshes[p] = surf.mesh
         g = Geometry("mesh", filename=f"meshes/{p}.obj")
-        links.append(Link(p, Inertial(surf.mass, surf.com, surf.inertia), (g,), (g,)))
+        if p == tree.root:
+            inertial = Inertial(surf.mass, surf.com, surf.inertia)
+        else:
+            mp = part_mass_properties(pts, density, p, per.voxel, keep_link[p])
+            inertial = Inertial(mp.mass, mp.com, mp.inertia)
+            mass_report[p] = {"points_kept": mp.kept, "points": mp.total, "volume_model": mp.method,
+                              "mass_of_whole_cloud_hull": surf.mass}
+        links.append(Link(p, inertial, (g,), (g,)))
         T = T_world_link0[p]
         clouds_world[p] = pts @ T[:3, :3].T + T[:3, 3]
     model = ArticulatedModel(name, tuple(links), tuple(joints))
-    return model, records, clouds_world, meshes, labels
+    return model, records, clouds_world, meshes, labels, mass_report
 
 
 def _filled(q: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -294,17 +315,18 @@ def _line_record(name: str, line: JointLine) -> dict:
 def refine_model(per: Perception, graph: GraphResult, seq, density: float, options: ScrewOptions | None,
                  name: str = "reconstruction"):
     """Closed-form model, then (unless ``options`` is None) the screw-axis NLP and the model rebuilt
-    on its joints.  Returns build_model's tuple plus the ``nlp`` document (None without NLP)."""
+    on its joints.  Returns build_model's first five, the ``nlp`` document (None without NLP) and
+    build_model's mass report."""
     lines = closed_form_lines(per, graph)
-    model, records, clouds_world, meshes, labels = build_model(per, graph, density, name, lines)
+    model, records, clouds_world, meshes, labels, mass_report = build_model(per, graph, density, name, lines)
     if options is None or not model.movable_joints:
-        return model, records, clouds_world, meshes, labels, None
+        return model, records, clouds_world, meshes, labels, None, mass_report
     t0 = time.perf_counter()
     data = screw_data(per, seq, model, lines, clouds_world, labels)
     prepare_s = time.perf_counter() - t0
     result = refine_screws(data, options)
     new_lines = refined_lines(result, per, lines)
-    model, records, clouds_world, meshes, labels = build_model(per, graph, density, name, new_lines, labels)
+    model, records, clouds_world, meshes, labels, mass_report = build_model(per, graph, density, name, new_lines, labels)
     model = _apply_identified(model, records, result)
     doc = {
         "enabled": True, "terms": result.terms, "iterations": result.iterations, "success": result.success,
@@ -315,7 +337,7 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
         "closed_form": [_line_record(n, lines[n]) for n in lines],
         "inertia_ratio": result.state.inertia_ratio,
     }
-    return model, records, clouds_world, meshes, labels, doc
+    return model, records, clouds_world, meshes, labels, doc, mass_report
 
 
 def reconstruct_sequence(seq_path: str | Path, out: str | Path | None = None, method: str = "graph",
@@ -348,7 +370,7 @@ def reconstruct_sequence(seq_path: str | Path, out: str | Path | None = None, me
         bar.update(1)
         bar.set_description("graph")
         t0 = time.perf_counter()
-        model, records, clouds_world, meshes, labels, nlp_doc = refine_model(per, graph, seq, density, options)
+        model, records, clouds_world, meshes, labels, nlp_doc, mass_report = refine_model(per, graph, seq, density, options)
         elapsed = time.perf_counter() - t0
         per.timing_s["nlp"] = nlp_doc["time_s"] if nlp_doc else 0.0
         per.timing_s["model"] = elapsed - per.timing_s["nlp"]
@@ -357,7 +379,7 @@ def reconstruct_sequence(seq_path: str | Path, out: str | Path | None = None, me
     doc = {
         "joints": records,
         "links": [{"name": l.name, "mass": l.inertial.mass, "density": density,
-                   "tracks": list(graph.best.parts[l.name])} for l in model.links],
+                   "tracks": list(graph.best.parts[l.name]), **mass_report.get(l.name, {})} for l in model.links],
         "alternatives": [{"log_score": t.log_score, "joints": [[j.parent, j.child, j.type] for j in t.joints]}
                          for t in graph.alternatives],
         "method": method,
