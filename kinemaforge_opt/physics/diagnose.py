@@ -82,6 +82,10 @@ SEARCH_RATE_HZ = 30.0
 # evidence: the NLP fit and its ΔBIC still decide).
 SCREEN = 5
 
+# How many times a selection round may be re-run after the chosen effects were re-fitted to a
+# better optimum from a candidate's solution (see ``diagnose``).
+MAX_PARENT_REFITS = 2
+
 # Effect types tested, in order; the parameters freed for each are its EFFECTS[type].params
 # (first = reported value).
 CANDIDATES: tuple[str, ...] = (
@@ -206,14 +210,39 @@ def _reported_value(model: ArticulatedModel, joint: str, effect: str, values: di
     return float(np.asarray(values[name]).ravel()[0])
 
 
+def stribeck_speeds(v: np.ndarray, eps: float, n: int = 12) -> np.ndarray:
+    """Candidate Stribeck speeds [rad/s or m/s] for a joint moving at speeds ``v`` (T,): a
+    geometric grid from twice the smooth-sign width ``eps`` (a Stribeck speed below it has no
+    shape the fit can see) to half the peak speed (above it the excess never fades within the
+    recording: Coulomb friction by another name; the NLP's bound)."""
+    hi = 0.5 * float(np.max(np.abs(v)))
+    lo = min(max(2.0 * eps, 1e-3), hi)
+    return np.geomspace(lo, hi, n) if hi > lo else np.array([hi])
+
+
+def _stribeck_column(v: np.ndarray, vs: float, eps: float) -> np.ndarray:
+    return -np.exp(-((v / vs) ** 2)) * np.tanh(v / eps)
+
+
+def _best_stribeck_speed(v: np.ndarray, r: np.ndarray, eps: float, base: list[np.ndarray], grid: np.ndarray) -> float:
+    """The speed of ``grid`` whose Stribeck column, with the columns ``base``, leaves the least of
+    ``r`` by linear least squares (v, r and the columns on the same samples)."""
+    def left(vs):
+        A = np.stack(base + [_stribeck_column(v, vs, eps)], axis=1)
+        return float(np.sum((r - A @ np.linalg.lstsq(A, r, rcond=None)[0]) ** 2))
+
+    return float(min(grid, key=left))
+
+
 def linear_init(model: ArticulatedModel, joint: str, effect: str, start: Trial, r_nom: np.ndarray,
                 q: np.ndarray, v: np.ndarray, eps: np.ndarray, v_scale: np.ndarray) -> dict[str, np.ndarray]:
     """Starting values of a force effect's parameters from the inverse-dynamics residual: the
     nominal model's missing generalised force ``r_nom`` (T, n) at smoothed (q, v), less the
     effects already in ``start``, regressed (least squares, moving samples only: at standstill
     dry friction takes any value) on the effect's force per unit parameter.  Most effects are
-    linear in their parameters; the Stribeck speed starts at a fifth of the RMS speed, a spring's
-    rest position comes from its two linear coefficients (else mid-motion)."""
+    linear in their parameters; the Stribeck speed is the one of :func:`stribeck_speeds` that
+    explains most, a spring's rest position comes from its two linear coefficients (else
+    mid-motion)."""
     k = model.joint_index(joint)
     r = r_nom[:, k].copy()
     for e_type in dict.fromkeys(e for e in EFFECTS if EFFECTS[e].force is not None):
@@ -224,11 +253,12 @@ def linear_init(model: ArticulatedModel, joint: str, effect: str, start: Trial, 
     if moving.sum() < 5:
         return {}
     qk, vk, rk = q[moving, k], v[moving, k], r[moving]
-    vs = 0.2 * v_scale[k]
+    vs = _best_stribeck_speed(vk, rk, float(eps[k]), [], stribeck_speeds(v[:, k], float(eps[k]))) \
+        if effect == "stribeck_friction" else 0.2 * v_scale[k]
     cols = {
         "viscous_damping": [-vk], "coulomb_friction": [-np.tanh(vk / eps[k])], "quadratic_drag": [-vk * np.abs(vk)],
         "constant_bias": [np.ones_like(vk)], "spring": [-qk, np.ones_like(qk)],
-        "stribeck_friction": [-np.exp(-((vk / vs) ** 2)) * np.tanh(vk / eps[k])],
+        "stribeck_friction": [_stribeck_column(vk, vs, eps[k])],
     }.get(effect)
     out = {}
     if effect == "stribeck_friction":
@@ -259,14 +289,14 @@ def _id_force(model: ArticulatedModel, q: np.ndarray, v: np.ndarray, a: np.ndarr
 
 
 def _columns(model: ArticulatedModel, joint: str, effect: str, q: np.ndarray, v: np.ndarray, id_force: np.ndarray,
-             eps: np.ndarray, v_scale: np.ndarray, stops: dict) -> list[np.ndarray]:
+             eps: np.ndarray, v_scale: np.ndarray, stops: dict, vs: float | None = None) -> list[np.ndarray]:
     """Force columns (each (T,)) of ``effect`` on ``joint`` for the linear pre-screen: the effect's
-    force per unit parameter (Stribeck at a fifth of the RMS speed), the rigid-body force M a + h
+    force per unit parameter (Stribeck at speed ``vs``, default a fifth of the RMS speed), the rigid-body force M a + h
     for an inertia ratio, gravity's sin q and cos q for a revolute axis tilt (a constant for a
     prismatic one), a one-sided ramp from the stop guess for a limit contact."""
     k = model.joint_index(joint)
     qk, vk = q[:, k], v[:, k]
-    vs = 0.2 * v_scale[k]
+    vs = 0.2 * v_scale[k] if vs is None else vs
     side, stop = stops[joint]
     span = float(np.ptp(qk))
     if effect == "axis_tilt":
@@ -274,7 +304,7 @@ def _columns(model: ArticulatedModel, joint: str, effect: str, q: np.ndarray, v:
     return {
         "viscous_damping": [-vk], "coulomb_friction": [-np.tanh(vk / eps[k])], "quadratic_drag": [-vk * np.abs(vk)],
         "constant_bias": [np.ones_like(vk)], "spring": [-qk, np.ones_like(qk)],
-        "stribeck_friction": [-np.exp(-((vk / vs) ** 2)) * np.tanh(vk / eps[k])],
+        "stribeck_friction": [_stribeck_column(vk, vs, eps[k])],
         "inertia_error": [id_force[:, k]],
         "limit_contact": [np.maximum(side * (qk - (stop - side * 0.05 * span)), 0.0)],
     }[effect]
@@ -285,14 +315,18 @@ def screen_scores(model: ArticulatedModel, pending: list[tuple[str, str]], selec
                   v_scale: np.ndarray, stops: dict) -> dict[tuple[str, str], float]:
     """Per hypothesis, the share of the nominal inverse-dynamics residual on its joint (moving
     samples) that the already selected effects on that joint leave and the hypothesis removes
-    too, by joint linear least squares on their force columns (:func:`_columns`); lower = explains
+    too, by joint linear least squares on their force columns (:func:`_columns`; a Stribeck
+    column at the speed of :func:`stribeck_speeds` that explains most); lower = explains
     more.  A cheap ranking, not evidence: the chosen hypotheses are then fitted by the NLP."""
     out = {}
     for joint, effect in pending:
         k = model.joint_index(joint)
         moving = np.abs(v[:, k]) > 0.05 * v_scale[k]
-        rk = r_nom[moving, k]
-        base = [c[moving] for j, e in selected if j == joint for c in _columns(model, j, e, q, v, id_force, eps, v_scale, stops)]
+        rk, vk, ek = r_nom[moving, k], v[moving, k], float(eps[k])
+        grid = stribeck_speeds(v[:, k], ek)  # a Stribeck column at the speed that explains most
+        base = [c[moving] for j, e in selected if j == joint
+                for c in _columns(model, j, e, q, v, id_force, eps, v_scale, stops,
+                                  _best_stribeck_speed(vk, rk, ek, [], grid) if e == "stribeck_friction" else None)]
 
         def left(cols):
             if not cols:
@@ -300,7 +334,8 @@ def screen_scores(model: ArticulatedModel, pending: list[tuple[str, str]], selec
             A = np.stack(cols, axis=1)
             return float(np.sum((rk - A @ np.linalg.lstsq(A, rk, rcond=None)[0]) ** 2))
 
-        new = [c[moving] for c in _columns(model, joint, effect, q, v, id_force, eps, v_scale, stops)]
+        vs = _best_stribeck_speed(vk, rk, ek, base, grid) if effect == "stribeck_friction" else None
+        new = [c[moving] for c in _columns(model, joint, effect, q, v, id_force, eps, v_scale, stops, vs)]
         out[(joint, effect)] = left(base + new) / max(left(base), 1e-300)
     return out
 
@@ -374,6 +409,27 @@ def _calibration(model: ArticulatedModel, rec: Recording, trial: Trial, effects:
     z = np.concatenate([trial.z[b.name] for b in fit.blocks]) if fit.blocks else np.zeros(0)
     res = Result(trial.success, trial.status, trial.iterations, float("nan"), {}, {}, {}, trial.solve_time_s)
     return _result(fit, res, trial.X, z, trial.solve_time_s)
+
+
+def _interval_holds_off(model: ArticulatedModel, joint: str, effect: str, final: Calibration) -> float | None:
+    """For an effect the model lacked (its parameter's nominal is its "off" value: zero force,
+    unit inertia ratio, the nominal axis), how far inside its 95 % interval the off value sits
+    (0 at an end, 1 in the middle), or None when the interval excludes it (a supported effect),
+    or the effect has no off value (a stop) or the model already had it."""
+    if effect == "limit_contact":
+        return None
+    e = final.estimates[_free_for(model, joint, effect)[0]]
+    if effect == "axis_tilt":
+        angle = _reported_value(model, joint, effect, {e.name: e.value})
+        half = e.ci95_angle_rad
+        return None if half is None or not np.isfinite(half) or angle > half else 1.0 - angle / max(half, 1e-300)
+    off = 1.0 if effect == "inertia_error" else 0.0
+    if abs(float(np.ravel(e.nominal)[0]) - off) > 1e-12:
+        return None
+    lo, hi = float(np.ravel(e.ci95_low)[0]), float(np.ravel(e.ci95_high)[0])
+    if not (np.isfinite(lo) and np.isfinite(hi)) or not lo <= off <= hi or hi <= lo:
+        return None
+    return 1.0 - abs(2.0 * off - lo - hi) / (hi - lo)
 
 
 def _n_params(names: list[str]) -> int:
@@ -489,21 +545,34 @@ def diagnose(
                 trial = other
         return trial
 
+    def trial_of_parent(effects_: list[tuple[str, str]], start: Trial) -> Trial:
+        """The hypothesis ``effects_`` fitted from ``start``'s states and values (its other
+        effects fixed off)."""
+        names = [n for j, e in effects_ for n in _free_for(model, j, e)]
+        return fit_for(effects_).solve(names, start=start, bounds={n: b for n, b in (start.bounds or {}).items() if n in names})
+
     selected: list[tuple[str, str, float]] = []  # (joint, effect, delta_bic)
     equivalents: dict[tuple[str, str], list[dict]] = {}
     tested: list[dict] = []
     current = nominal_trial
     n_res = srch.q.size
     judged_by_held_out = False
-    for _ in range(max_effects):
+    rounds = 0
+    strong_before: set[tuple[str, str]] = set()  # hypotheses the last round's fits found strong
+    while len(selected) < max_effects and rounds < max_effects + MAX_PARENT_REFITS:
+        rounds += 1
         rss0 = _rss_q(current.q_fit, srch.q, sigma_s)
         rows = []
         pending = [(j, e) for j in model.joint_names for e in candidates if not any(s[:2] == (j, e) for s in selected)]
         if screen is not None and len(pending) > screen:
             # Linear pre-screen: the inverse-dynamics residual of the current model is linear
             # in most effect parameters; only the hypotheses that reduce it most get an NLP fit.
+            # The linear ranking is weak once an effect is in (its column absorbs what collinear
+            # ones would explain), so hypotheses the previous round's NLP fits found strong are
+            # fitted again whatever their rank.
             scores = screen_scores(model, pending, [x[:2] for x in selected], r_nom, id_force, q_s, v_s, eps, v_scale, stops)
-            pending = sorted(pending, key=lambda je: scores[je])[:screen]
+            top = sorted(pending, key=lambda je: scores[je])[:screen]
+            pending = [je for je in pending if je in top or je in strong_before]
         for joint, effect in pending:
             say(f"testing {effect} on {joint}")
             trial = trial_of([s[:2] for s in selected] + [(joint, effect)], current)
@@ -536,9 +605,28 @@ def diagnose(
         if not ok:
             break
         strong = sorted((r for r in ok if r["delta_bic"] < DELTA_BIC), key=lambda r: r["delta_bic"])
+        strong_before = {(r["joint"], r["type"]) for r in strong}
         if not strong:
             break
         best = strong[0]
+        # The gain must be the new effect's, not a better optimum of the effects already chosen
+        # that the new fit reached from its own start (dry friction makes the fit multimodal):
+        # re-fit the parent hypothesis from the new fit's solution with the new effect off.  If
+        # the parent then fits as well (ΔBIC of the new effect no longer below DELTA_BIC), the
+        # re-fitted parent replaces the current fit and the round is run again against it.
+        parent = trial_of_parent([x[:2] for x in selected], best["trial"])
+        if parent.success:
+            rss_p = _rss_q(parent.q_fit, srch.q, sigma_s)
+            if n_eff * np.log(rss_p / rss0) < -EQUIVALENT_LOGLIK:  # a decisively better parent fit
+                d_new = float(n_eff * np.log(best["rss"] / rss_p) + best["k"] * np.log(n_eff))
+                tested.append({"parent_refit": [f"{e} on {j}" for j, e, _ in selected], "from": f"{best['type']} on {best['joint']}",
+                               "delta_bic_parent": float(n_eff * np.log(rss_p / rss0)), "delta_bic": d_new})
+                say(f"the chosen effects fit better from the {best['type']} fit's start; "
+                    f"{best['type']} then gains ΔBIC {d_new:.0f}")
+                current = parent
+                if d_new >= DELTA_BIC:
+                    continue
+                best = {**best, "delta_bic": d_new}
         # Hypotheses that explain the data as well as the chosen one (log-likelihood within
         # EQUIVALENT_LOGLIK on the same scale) are reported with it: the recording cannot tell them apart.
         equivalents[(best["joint"], best["type"])] = [
@@ -558,7 +646,8 @@ def diagnose(
                       if (j, e) not in keep and (j, e) != selected[i][:2]]
             if screen is not None and len(others) > screen:
                 scores = screen_scores(model, others, keep, r_nom, id_force, q_s, v_s, eps, v_scale, stops)
-                others = sorted(others, key=lambda je: scores[je])[:screen]
+                top = sorted(others, key=lambda je: scores[je])[:screen]
+                others = [je for je in others if je in top or je in strong_before]
             for joint, effect in others:
                 say(f"testing {effect} on {joint} in place of {selected[i][1]}")
                 trial = trial_of(keep + [(joint, effect)], current)
@@ -650,6 +739,28 @@ def diagnose(
                                 x0=full.states_from(t_s, current.X)) if chosen else nominal_full
         nominal = _calibration(model, fit_rec, nominal_full, [], stops, segment_s, sigma_q, eps)
         final = _calibration(model, fit_rec, final_full, chosen, stops, segment_s, sigma_q, eps)
+    # An effect the model lacked whose 95 % interval still holds its "off" value (zero force, unit
+    # inertia ratio, nominal axis) is not supported by the data, whatever the BIC of the search
+    # said (a fit can gain from reaching another optimum of the other effects): drop it, the
+    # weakest first, and re-fit.
+    while True:
+        weak = [(i, w) for i, (j, e, _) in enumerate(selected) if (w := _interval_holds_off(model, j, e, final)) is not None]
+        if not weak:
+            break
+        i = max(weak, key=lambda iw: iw[1])[0]
+        joint, effect, _ = selected.pop(i)
+        say(f"dropped {effect} on {joint}: its 95% interval holds its off value")
+        tested.append({"interval_check": f"{effect} on {joint}", "dropped": True})
+        equivalents.pop((joint, effect), None)
+        chosen = [s[:2] for s in selected]
+        names = [n for j, e in chosen for n in _free_for(model, j, e)]
+        if k_dec == 1:
+            current = trial_of_parent(chosen, current) if chosen else nominal_trial
+            final = _calibration(model, fit_rec, current, chosen, stops, segment_s, sigma_q, eps)
+        else:
+            final_full = full.solve(names, start=final_full, bounds={n: b for n, b in current.bounds.items() if n in names}) \
+                if chosen else nominal_full
+            final = _calibration(model, fit_rec, final_full, chosen, stops, segment_s, sigma_q, eps)
     mismatch = locate(model, fit_rec, nominal.q_fit, sigma_q)
     found = []
     for joint, effect, d in selected:
