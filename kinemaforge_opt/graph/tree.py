@@ -174,7 +174,31 @@ def _log(x: float) -> float:
 
 
 def _tree(root, parts, edges, arcs) -> KinematicTree:
-    """Order arcs parent-before-child and name joints j0, j1, …"""
+    """Order arcs parent-before-child and name joints j0, j1, …  A child whose chosen relation
+    is rigid is part of its parent's link (a fixed joint joins nothing): its members join the
+    parent part, its own children hang from the parent, and log ρ of that arc still counts in the
+    tree's score."""
+    rigid_score = 0.0
+    owner = {p: p for p in parts}
+
+    def top(p):
+        while owner[p] != p:
+            p = owner[p]
+        return p
+
+    for a, b in arcs:
+        h = _best_type(edges[(a, b)])
+        if h.type == "rigid" and h.confidence > 0:  # (all-zero ρ is no choice: greedy's last resort)
+            owner[b] = a
+            rigid_score += _log(h.confidence)
+    if any(owner[p] != p for p in parts):
+        merged: dict[str, list[str]] = {}
+        for p in parts:
+            merged.setdefault(top(p), []).extend(parts[p])
+        parts = {p: tuple(m) for p, m in merged.items()}
+        # a joint keeps its fitted relation to the (rigidly attached) member it was fitted to
+        edges = {**edges, **{(top(a), b): edges[(a, b)] for a, b in arcs if owner[b] == b and top(a) != a}}
+        arcs = [(top(a), b) for a, b in arcs if owner[b] == b]
     children: dict[str, list[str]] = {}
     for a, b in arcs:
         children.setdefault(a, []).append(b)
@@ -187,7 +211,7 @@ def _tree(root, parts, edges, arcs) -> KinematicTree:
     joints = tuple(
         TreeJoint(f"j{i}", a, b, _best_type(edges[(a, b)])) for i, (a, b) in enumerate(order)
     )
-    return KinematicTree(root, parts, joints, sum(_log(j.hypothesis.confidence) for j in joints))
+    return KinematicTree(root, parts, joints, rigid_score + sum(_log(j.hypothesis.confidence) for j in joints))
 
 
 def _graph_trees(parts, edges, k_best: int) -> list[KinematicTree]:

@@ -70,7 +70,7 @@ MIN_VISIBLE_SHARE = 0.2
 # A new proposal joins a tracked one when it moves with it at this share of common steps.
 COMOVING_SHARE = 0.8
 # Growing: rounds of CLUSTER_VOXELS each, and time steps compared per round.
-GROW_ROUNDS = 8
+GROW_ROUNDS = 100
 GROW_STEPS = 10
 
 
@@ -258,7 +258,26 @@ class Tracker:
                     Ts[s] = T
                     solved.append(T)
                 s += direction
-        return Proposal(name, ref, self.grow(ref, points, Ts), Ts)
+        grown = self.grow(ref, points, Ts)
+        return Proposal(name, ref, self.grow_far(ref, grown, Ts), Ts)
+
+    def grow_far(self, ref: int, points: np.ndarray, Ts: np.ndarray) -> np.ndarray:
+        """(N', 3) ``points`` [m, at ``ref``] plus what :meth:`grow` adds at the observed step
+        where the part lies farthest from its reference pose, carried back to ``ref``: a face
+        hidden at the reference time (a door's inner side while it is shut) shows there."""
+        obs = [s for s in range(len(Ts)) if s != ref and np.all(np.isfinite(Ts[s])) and len(self.clouds[s].points)]
+        if not obs:
+            return points
+        reach = np.linalg.norm(points.max(axis=0) - points.min(axis=0))
+        disp = [np.linalg.norm(Ts[s][:3, :3] - np.eye(3)) * reach + np.linalg.norm(Ts[s][:3, 3]) for s in obs]
+        far = obs[int(np.argmax(disp))]
+        if max(disp) < ICP_COARSE_VOXELS * self.voxel:  # the part never left its reference pose
+            return points
+        back = np.linalg.inv(Ts[far])
+        Ts_far = np.array([T @ back if np.all(np.isfinite(T)) else T for T in Ts])
+        moved = points @ Ts[far][:3, :3].T + Ts[far][:3, 3]
+        extra = self.grow(far, moved, Ts_far)[len(moved):]
+        return np.concatenate([points, extra @ back[:3, :3].T + back[:3, 3]])
 
     def grow(self, ref: int, points: np.ndarray, Ts: np.ndarray) -> np.ndarray:
         """(N', 3) ``points`` plus the reference cloud's points next to them that the track
@@ -272,7 +291,9 @@ class Tracker:
         steps = [obs[k] for k in np.argsort(disp)[::-1][:GROW_STEPS]]
         cloud = self.clouds[ref].points
         in_part = np.zeros(len(cloud), dtype=bool)
-        in_part[cKDTree(points).query(cloud, distance_upper_bound=1e-9)[0] < 1e-9] = True
+        # the cloud's own copies of the points (exact at the reference step, within half a voxel
+        # when the points were carried there by a track)
+        in_part[cKDTree(points).query(cloud, distance_upper_bound=0.5 * self.voxel)[0] < np.inf] = True
         fine = ICP_FINE_VOXELS * self.voxel
         reach_r = CLUSTER_VOXELS * self.voxel
         tested = in_part.copy()
