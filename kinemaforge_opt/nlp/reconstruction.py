@@ -59,6 +59,17 @@ from .structured_hessian import DenseTerms, lagrangian_hessian
 from .visual import Correspondences, SurfaceModel, correspond, surface_model, fixed_subsample, pseudo_huber, robust_value, z_vector
 
 ENERGY_MODES = ("soft", "hard", "off")
+# Prior spread of log(inertia ratio): the robust mesh inertia (perception/mass.py) came within
+# 0.9-4.5x of the true joint-space inertia on eight synthetic bench cases (160x120, 4 views), so a
+# factor 2 is one standard deviation.  At camera rate (2-10 Hz) the data alone trade inertia for
+# damping and initial speed; the prior keeps the scale where the geometry puts it unless the
+# recorded forces say otherwise.
+INERTIA_PRIOR_SIGMA = float(np.log(2.0))
+# A joint arriving at the end of its observed range counts as hitting a stop when its speed drops
+# in one frame step by more than this factor and it arrived faster than STOP_MIN_SPEED × its
+# peak speed (a door that friction brings to rest slows down smoothly instead).
+STOP_DROP = 3.0
+STOP_MIN_SPEED = 0.1
 HESSIANS = ("exact", "gauss_newton", "flat", "lbfgs")
 
 
@@ -81,7 +92,11 @@ class ScrewOptions:
     "flat" (casadi's exact Hessian of the whole expanded graph: seconds to build) or "lbfgs".
     expand: expand the dense stage to SX (see :func:`_solver_options`).  refuse: after the warm-up,
     rebuild every surface model from all steps' observed points moved back to q = 0 by the
-    NLP's motion, and warm up again on it.
+    NLP's motion, and warm up again on it.  inertia_prior_sigma: standard deviation of
+    log(inertia ratio) around 1 (the mesh's inertia), a Gaussian prior added to the objective
+    (``inertia_prior``; 0 or inf = no prior).  stop_impacts: leave the dynamics and energy terms
+    out from the frame before a joint runs into the end of its observed range at speed (an impact
+    on a stop, which the NLP does not model) to the end of the recording.
     """
 
     vis: bool = True
@@ -102,6 +117,8 @@ class ScrewOptions:
     hessian: str = "exact"
     refuse: bool = False
     expand: bool = True
+    inertia_prior_sigma: float = INERTIA_PRIOR_SIGMA
+    stop_impacts: bool = True
 
     def __post_init__(self):
         if self.energy not in ENERGY_MODES:
@@ -375,6 +392,38 @@ def _rates(t: np.ndarray, q: np.ndarray) -> tuple[CubicSpline, np.ndarray, np.nd
     return spline, v_s, a_s
 
 
+def stop_impact_time(times: np.ndarray, q: np.ndarray) -> float:
+    """Time [s] from which the recording holds a stop impact: the frame before the first frame i
+    at which a joint, after leaving its start, is within 2 % of its observed range of an end of
+    that range, arrived there faster than STOP_MIN_SPEED × its peak speed, and its speed changed
+    over that frame more than STOP_DROP× as much as over any of the three frames before (a smooth
+    turn or a friction stop decelerates gradually; an impact at once); inf when there is none.
+    times (T,) [s], q (T, n) [rad or m] at the observed frames."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    if q.shape[0] != times.size:
+        q = q.T
+    if times.size < 5:
+        return float("inf")
+    v = np.diff(q, axis=0) / np.diff(times)[:, None]  # (T-1, n): v[j] over frame step j -> j + 1
+    dv = np.abs(np.diff(v, axis=0))  # (T-2, n): dv[i-1] = |v[i] - v[i-1]|, the change at frame i
+    first = float("inf")
+    for k in range(q.shape[1]):
+        lo, hi = q[:, k].min(), q[:, k].max()
+        if hi - lo <= 0:
+            continue
+        tol = 0.02 * (hi - lo)
+        left = np.maximum.accumulate(np.abs(q[:, k] - q[0, k])) > tol
+        peak = np.abs(v[:, k]).max()
+        for i in range(2, times.size - 1):
+            if not (left[i] and (q[i, k] >= hi - tol or q[i, k] <= lo + tol)):
+                continue
+            before = dv[max(i - 4, 0):i - 1, k].max()
+            if abs(v[i - 1, k]) > STOP_MIN_SPEED * peak and dv[i - 1, k] > STOP_DROP * before:
+                first = min(first, float(times[i - 1]))
+            break
+    return first
+
+
 def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewState,
                         corr: dict[str, list[Correspondences]] | None, dense: bool) -> ScrewProblem:
     """Build the NLP around ``state`` with fixed correspondences ``corr`` (see module doc).
@@ -444,14 +493,29 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         r = prob.variable(f"inertia_ratio:{l}", 1, lower=0.02, upper=50.0, init=state.inertia_ratio.get(l, 1.0))
         ratios[l] = r
         theta_parts.append(r * ca.DM(dyn.parameter(f"{l}.inertia").nominal))
+    use_prior = bool(ratios) and 0 < options.inertia_prior_sigma < np.inf
     theta_mx = ca.vertcat(*theta_parts)
 
     # --- states ------------------------------------------------------------------------------
     G = t_grid.size
     if use_dyn:
+        t_stop = stop_impact_time(data.times, state.q[cols_state]) if options.stop_impacts else np.inf
+        dyn_mask = (t_grid[:-1] < t_stop - 1e-9).astype(float)  # interval k: grid k -> k + 1
+        if not dyn_mask.any():
+            dyn_mask[:] = 1.0  # an impact at the first frame: nothing would be left
         lower, upper = np.full((2 * n, G), -np.inf), np.full((2 * n, G), np.inf)
         if not options.vis:  # nothing observes q: hold the observed steps at the current values
             lower[:n, frame_cols] = upper[:n, frame_cols] = q0.T[:, frame_cols]
+        # past a stop impact no term sees v, nor q between frames: hold them (IPOPT drops them)
+        after = np.zeros(G, dtype=bool)
+        after[1:] = dyn_mask == 0  # column c ends interval c - 1
+        x_init = np.vstack([q0.T, v0.T])
+        held = np.zeros((2 * n, G), dtype=bool)
+        held[n:, after] = True
+        between = after.copy()
+        between[frame_cols] = False
+        held[:n, between] = True
+        lower[held] = upper[held] = x_init[held]
         X = prob.variable("x", (2 * n, G), init=np.vstack([q0.T, v0.T]), lower=lower, upper=upper)
         Q, V = X[:n, :], X[n:, :]
     else:
@@ -538,19 +602,26 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         Rg, Wg = point.map(G)(X, P, F, S, theta_mx, phi_mx)
         Dsum, Wk, _ = interval.map(G - 1)(X[:, :-1], X[:, 1:], Rg[:, :-1], Rg[:, 1:], Wg[:, :-1], Wg[:, 1:],
                                        Pm, Fm, Sm, np.diff(t_grid)[None, :], theta_mx, phi_mx)
-        terms["dyn"] = ca.sum2(Dsum)
+        terms["dyn"] = ca.sum2(Dsum * ca.DM(dyn_mask[None, :]))
         if use_energy:
             steps = max(1, int(round(options.energy_window_s / max(np.median(np.diff(t_grid)), 1e-9))))
             edges = list(range(0, G - 1, steps)) + [G - 1]
             E = energy.map(len(edges))(X[:, edges], theta_mx)  # ΔE telescopes: only window edges
             resid = ca.vertcat(*[E[i + 1] - E[i] - ca.sum2(Wk[:, a:b]) for i, (a, b) in enumerate(zip(edges[:-1], edges[1:]))])
+            e_mask = np.array([float(dyn_mask[a:b].all()) for a, b in zip(edges[:-1], edges[1:])])
             e_scale = _energy_scale(model, dyn, q0, v0)
             rel = resid / e_scale
             if options.energy == "soft":
-                terms["energy"] = ca.sumsqr(rel / options.energy_sigma) * options.energy_weight
+                terms["energy"] = ca.sumsqr(rel * ca.DM(e_mask) / options.energy_sigma) * options.energy_weight
             else:
-                prob.add_constraint("energy", rel, -options.energy_tolerance, options.energy_tolerance)
-                terms["energy_residual"] = ca.sumsqr(rel)
+                big = np.where(e_mask > 0, options.energy_tolerance, np.inf)
+                prob.add_constraint("energy", rel, -big, big)
+                terms["energy_residual"] = ca.sumsqr(rel * ca.DM(e_mask))
+    prior_fn = None
+    if use_dyn and use_prior:
+        # ½ Σ (log r / σ)²: in the units of the other terms (each ≈ ½ χ²), added with the same weight
+        zr = [prob.symbol(f"inertia_ratio:{l}") for l in ratios]
+        terms["inertia_prior"] = 0.5 * ca.sumsqr(ca.log(ca.vertcat(*zr)) / options.inertia_prior_sigma)
     for name, expr in terms.items():
         if name == "energy_residual":  # reported, not minimised
             continue
@@ -564,12 +635,15 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
     if use_dyn and options.hessian in ("exact", "gauss_newton"):
         pnames = [name for name in prob.terms["variables"] if name != "x"]
         theta_phi = ca.Function("theta_phi", [prob.symbol(name) for name in pnames], [theta_mx, phi_mx])
+        if "inertia_prior" in terms:
+            prior_fn = ca.Function("inertia_prior", [prob.symbol(name) for name in pnames], [terms["inertia_prior"]])
         hess_lag = lagrangian_hessian(DenseTerms(
             prob, n, G, theta_phi, point, interval, energy if use_energy else None, (P, F, S), (Pm, Fm, Sm),
             np.diff(t_grid), vis_blocks, 1.0 / norm, options.energy if use_energy else "off",
             edges if use_energy else [], e_scale if use_energy else 1.0,
             options.energy_weight / options.energy_sigma**2,
-            [(f"axis:{j.name}", f"unit_axis:{j.name}") for j in joints], options.hessian == "gauss_newton"))
+            [(f"axis:{j.name}", f"unit_axis:{j.name}") for j in joints], options.hessian == "gauss_newton",
+            dyn_mask=dyn_mask, energy_mask=e_mask if use_energy else None, prior=prior_fn))
     return ScrewProblem(prob, data, options, new_state, frame_cols, dyn, tuple(free), use_dyn, n_vis, hess_lag)
 
 
@@ -708,7 +782,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     sp, res = run("full", corr, dense=True)
     model = state_model(data, state)
     cols = np.searchsorted(state.t, data.times)
-    terms = {"vis": None, "dyn": None, "energy": None}
+    terms = {"vis": None, "dyn": None, "energy": None, "inertia_prior": None}
     for name, value in res.costs.items():
         key = "energy" if name == "energy_residual" else name
         terms[key] = float(value) * (max(sp.n_vis, 1) if name != "energy_residual" else 1.0)

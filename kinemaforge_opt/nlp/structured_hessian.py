@@ -44,7 +44,9 @@ class DenseTerms:
     H blocks (13, 13 T)).  cost_weight: the objective's weight on every cost (1 / n_vis).
     energy: "soft", "hard" or "off".  edges: window edge columns.  e_scale: energy scale [J].
     energy_coef: the soft weight (energy_weight / energy_sigma²).  axis_vars: names of the unit
-    axis variables with their constraint names.
+    axis variables with their constraint names.  dyn_mask: (G − 1,) 0/1 weight of each interval's
+    defect cost (None = all 1).  energy_mask: (windows,) 0/1 weight of each soft window residual.
+    prior: Function of the parameter variables (as theta_phi) -> a cost added with cost_weight.
     """
 
     problem: object
@@ -65,6 +67,9 @@ class DenseTerms:
     energy_coef: float
     axis_vars: list
     gauss_newton: bool = False
+    dyn_mask: np.ndarray | None = None
+    energy_mask: np.ndarray | None = None
+    prior: ca.Function | None = None
 
 
 def _scatter(nr: int, nc: int, rows: np.ndarray, cols: np.ndarray, vals: ca.MX) -> ca.MX:
@@ -173,6 +178,8 @@ def lagrangian_hessian(t: DenseTerms) -> ca.Function:
             E = ca.Function("energy_edges", [sx, zs], [Esx]).map(len(edges))(X[:, edges], z)
             sums = ca.vertcat(*[ca.sum2(Wk[:, a:b]) for a, b in zip(edges[:-1], edges[1:])])
             rel = (E[1:].T - E[:-1].T - sums) / t.e_scale
+            if t.energy_mask is not None:
+                rel = rel * ca.DM(np.asarray(t.energy_mask, float))
             coef = lfw * 2 * t.energy_coef * rel / t.e_scale  # (nwin, 1)
         else:
             coef = lam_g[gs["energy"]] / t.e_scale
@@ -182,7 +189,8 @@ def lagrangian_hessian(t: DenseTerms) -> ca.Function:
         idx_e = np.array([np.concatenate([xcol(c), zidx]) for c in edges])
         if not t.gauss_newton:
             add_blocks(idx_e, He)
-    Hd, gW_all = f_int.map(K)(X[:, :-1], X[:, 1:], z, *wr, lfw, mu_k)
+    lf_k = lfw if t.dyn_mask is None else lfw * ca.DM(np.asarray(t.dyn_mask, float)[None, :])
+    Hd, gW_all = f_int.map(K)(X[:, :-1], X[:, 1:], z, *wr, lf_k, mu_k)
     idx_d = np.array([np.concatenate([xcol(k), xcol(k + 1), zidx]) for k in range(K)])
     add_blocks(idx_d, Hd)
     if t.energy == "soft":
@@ -201,6 +209,8 @@ def lagrangian_hessian(t: DenseTerms) -> ca.Function:
                 jc.append(idx_e[e])
                 jv.append(-ca.vec(gE[:, e * nb_e:(e + 1) * nb_e]))
         J = _scatter(nwin, nw, np.concatenate(jr), np.concatenate(jc), ca.vertcat(*jv))
+        if t.energy_mask is not None:
+            J = ca.mtimes(ca.diag(ca.DM(np.asarray(t.energy_mask, float))), J)
         extra.append(ca.triu(lfw * 2 * t.energy_coef / t.e_scale**2 * ca.mtimes(J.T, J)))
 
     # vis blocks
@@ -212,6 +222,11 @@ def lagrangian_hessian(t: DenseTerms) -> ca.Function:
         Hv = fh.map(len(frame_cols))(X[:n, list(map(int, frame_cols))], z, Hs)
         idx_v = np.array([np.concatenate([xoff + nx * int(c) + np.arange(n), zidx]) for c in frame_cols])
         add_blocks(idx_v, lfw * Hv)
+
+    # parameter prior
+    if t.prior is not None:
+        fp = ca.Function("prior_hess", [zs], [ca.densify(ca.hessian(t.prior.expand()(*parts), zs)[0])], {"cse": True})
+        add_blocks(zidx[None, :], lfw * fp(z))
 
     # unit-axis constraints
     for var, con in t.axis_vars:

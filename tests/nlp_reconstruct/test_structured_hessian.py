@@ -24,11 +24,18 @@ def data():
                       wrenches=w)
 
 
-@pytest.mark.parametrize("energy", ["soft", "hard", "off"])
-def test_assembled_hessian_equals_the_exact_hessian_of_the_lagrangian(data, energy):
+@pytest.mark.parametrize("energy,impact", [("soft", False), ("hard", False), ("off", False), ("soft", True), ("hard", True)])
+def test_assembled_hessian_equals_the_exact_hessian_of_the_lagrangian(data, energy, impact, monkeypatch):
+    """With ``impact``, a stop impact is declared at 0.8 s: the intervals and energy windows after
+    it leave the objective (masked in both Hessians).  The inertia prior is on in every case."""
+    import kinemaforge_opt.nlp.reconstruction as reco
+
+    if impact:
+        monkeypatch.setattr(reco, "stop_impact_time", lambda times, q: 0.8)
     opts = ScrewOptions(energy=energy, energy_window_s=0.5)  # 3 windows of 5 intervals
     state = initial_state(data)
     sp = build_screw_problem(data, opts, state, correspondences(data, state, 50), dense=True)
+    assert "inertia_prior" in sp.problem.terms["costs"]
     prob = sp.problem
     names = prob.terms["variables"]
     x = ca.vertcat(*[ca.vec(prob._vars[n].symbol) for n in names])
