@@ -99,6 +99,11 @@ def _pair_fits(tracks: PoseTracks) -> dict[tuple[str, str], dict[str, JointHypot
     return out
 
 
+def _adequate_rigid(h: JointHypothesis) -> bool:
+    """A rigid fit whose residual RMS is within SIGNIFICANCE·√3·σ of the pair's noise."""
+    return h.residual_rms <= SIGNIFICANCE * np.sqrt(3.0) * h.noise_sigma
+
+
 def _merge(tracks: PoseTracks, fits) -> dict[str, tuple[str, ...]]:
     """Union–find over confident rigid pairs -> {part name: members}; the part holding the world
     is named 'base', others after their first member."""
@@ -114,7 +119,7 @@ def _merge(tracks: PoseTracks, fits) -> dict[str, tuple[str, ...]]:
         rigid = hyps["rigid"]
         # Confident *and* adequate: rigid is the most probable type and its residual is at the
         # noise level (when no type fits, rigid can win by default; that is no reason to merge).
-        if rigid.confidence >= MERGE_PROBABILITY and rigid.residual_rms <= SIGNIFICANCE * np.sqrt(3.0) * rigid.noise_sigma:
+        if rigid.confidence >= MERGE_PROBABILITY and _adequate_rigid(rigid):
             ra, rb = find(a), find(b)
             if ra != rb:
                 keep = WORLD if WORLD in (ra, rb) else min(ra, rb)
@@ -175,7 +180,7 @@ def _log(x: float) -> float:
 
 def _tree(root, parts, edges, arcs) -> KinematicTree:
     """Order arcs parent-before-child and name joints j0, j1, …  A child whose chosen relation
-    is rigid is part of its parent's link (a fixed joint joins nothing): its members join the
+    is rigid, with a residual at the noise level, is part of its parent's link: its members join the
     parent part, its own children hang from the parent, and log ρ of that arc still counts in the
     tree's score."""
     rigid_score = 0.0
@@ -188,7 +193,10 @@ def _tree(root, parts, edges, arcs) -> KinematicTree:
 
     for a, b in arcs:
         h = _best_type(edges[(a, b)])
-        if h.type == "rigid" and h.confidence > 0:  # (all-zero ρ is no choice: greedy's last resort)
+        # adequate rigid fits only (as in _merge): a rigid "best" that misfits by far more than
+        # the noise is no evidence of a fixed attachment (a poorly tracked part) and stays visible
+        # as a fixed joint; all-zero ρ is no choice either (greedy's last resort)
+        if h.type == "rigid" and h.confidence > 0 and _adequate_rigid(h):
             owner[b] = a
             rigid_score += _log(h.confidence)
     if any(owner[p] != p for p in parts):
