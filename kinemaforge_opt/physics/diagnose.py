@@ -493,7 +493,11 @@ def diagnose(
         if "axis" not in search:  # the symbolic axis makes every evaluation ~10x dearer: build on demand
             search["axis"] = HypothesisFit(model, srch, hyps + [(j, "axis_tilt") for j in model.joint_names
                                                                    if "axis_tilt" in candidates],
-                                           segment_s, stops, CANDIDATE_MAX_ITER, sigma_s, eps)
+                                           segment_s, stops, CANDIDATE_MAX_ITER, sigma_s, eps,
+                                           # the same CPU budget per hypothesis as without a free axis
+                                           # (each evaluation costs ~5x more; tilts that the data
+                                           # show converge in < 20 iterations)
+                                           max_cpu_s=search["base"].nlp.max_cpu_s)
         return search["axis"]
 
     nominal_trial = search["base"].solve([])

@@ -70,7 +70,7 @@ class _StructuredNLP:
     defects (interval order), then |axis|² - 1 per free-axis block.  Objective: the noise-
     normalised squared output error at the samples, averaged over samples (as ``output_q``)."""
 
-    def __init__(self, fit, max_iter: int, tol: float = 1e-6, print_level: int = 0):
+    def __init__(self, fit, max_iter: int, tol: float = 1e-6, print_level: int = 0, max_cpu_s: float | None = None):
         import casadi as ca
 
         rec = fit.recording
@@ -234,9 +234,10 @@ class _StructuredNLP:
         hess_fn(w_probe, [], 1.0, np.zeros(ng))
         jac_fn(w_probe, [])
         t_eval = _time.process_time() - t0
+        self.max_cpu_s = max(1.0, max_iter * t_eval) if max_cpu_s is None else float(max_cpu_s)
         opts = {"ipopt.max_iter": max_iter, "ipopt.tol": tol, "ipopt.print_level": print_level, "print_time": False,
                 "ipopt.sb": "yes", "jac_g": jac_fn, "hess_lag": hess_fn,
-                "ipopt.max_cpu_time": max(1.0, max_iter * t_eval), **IPOPT_OPTIONS}
+                "ipopt.max_cpu_time": self.max_cpu_s, **IPOPT_OPTIONS}
         self.solver = ca.nlpsol("hypotheses", "ipopt", {"x": w, "f": f, "g": g}, opts)
         self.fit = fit
 
@@ -247,12 +248,15 @@ class HypothesisFit:
     Build once (``__init__``), then :meth:`solve` any subset of their parameters.
     limit_stops: per joint (side, initial stop) for ``limit_contact``, sigma_q (n,) the encoder
     noise and friction_eps (n,) the smooth-sign width [rad/s or m/s] (defaults: from the
-    recording; see :func:`kinemaforge_opt.nlp.joint_space.build_joint_space_fit`).
+    recording; see :func:`kinemaforge_opt.nlp.joint_space.build_joint_space_fit`).  max_cpu_s: IPOPT
+    CPU-time cap of a solve [s] (default: ``max_iter`` evaluations of the derivatives, timed at
+    build, at least 1 s).
     """
 
     def __init__(self, model: ArticulatedModel, recording: Recording, hypotheses: list[tuple[str, str]],
                  segment_s: float | None = None, limit_stops: dict | None = None, max_iter: int = 100,
-                 sigma_q: np.ndarray | None = None, friction_eps: np.ndarray | None = None):
+                 sigma_q: np.ndarray | None = None, friction_eps: np.ndarray | None = None,
+                 max_cpu_s: float | None = None):
         names: list[str] = []
         for joint, effect in hypotheses:
             for n in effect_parameters(model, joint, effect):
@@ -263,7 +267,7 @@ class HypothesisFit:
         self.fit = build_joint_space_fit(model, recording, self.names, energy="off", segment_s=segment_s,
                                          limit_stops=limit_stops, sigma_q=sigma_q, friction_eps=friction_eps)
         self.blocks = {b.name: b for b in self.fit.blocks}
-        self.nlp = _StructuredNLP(self.fit, max_iter)
+        self.nlp = _StructuredNLP(self.fit, max_iter, max_cpu_s=max_cpu_s)
         self.recording = self.fit.recording
         rec = self.recording
         n = model.nq
