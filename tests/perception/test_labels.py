@@ -1,0 +1,55 @@
+"""Point labels against the synthetic world's ground-truth label images: the environment (floor,
+back wall) takes the environment label at any range, and the static body is one part."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinemaforge_opt.perception.change import STATIC, UNKNOWN
+from kinemaforge_opt.perception.perceive import static_depth
+
+
+def test_static_depth_is_the_mean_of_the_static_readings():
+    rng = np.random.default_rng(0)
+    T, h, w = 12, 5, 7
+    truth = rng.uniform(1.0, 3.0, (h, w))
+    D = truth + 0.02 * rng.standard_normal((T, h, w))
+    status = np.full((T, h, w), STATIC, dtype=np.int8)
+    status[:4, 0, 0] = UNKNOWN  # a pixel static at steps 4.. only
+    D[:4, 0, 0] = 0.5  # (what it saw before does not count)
+    status[:, 1, 1] = UNKNOWN  # never static
+    D[5, 2, 2] = np.nan  # a dropout
+    mean = static_depth(D.astype(np.float32), status)
+    want = np.nanmean(np.where(status == STATIC, D, np.nan), axis=0)
+    assert np.isnan(mean[1, 1]) and np.isnan(want[1, 1])
+    np.testing.assert_allclose(mean[np.isfinite(want)], want[np.isfinite(want)], atol=1e-6)
+    # the temporal mean is √T times less noisy than one reading
+    err = np.abs(mean - truth)[np.isfinite(want)]
+    assert np.sqrt(np.mean(err**2)) < 0.02 / np.sqrt(T) * 1.5
+
+
+@pytest.fixture(scope="module")
+def fridge(tmp_path_factory):
+    """A refrigerator (the deepest scene: the back wall ~3 m from the cameras, where one D435
+    reading is noisier than the plane band) at 320×240, 2 views, 12 steps."""
+    from problems.eval_perception import ground_truth, instance_case, run
+    from kinemaforge_opt.synth import generate_case
+
+    root = tmp_path_factory.mktemp("labels") / "fridge"
+    generate_case(instance_case("refrigerator", 0, views=2, frames=12, width=320, height=240), root)
+    per, graph, _, _ = run(root / "sequence")
+    return per, graph, ground_truth(root)
+
+
+def test_environment_pixels_get_the_environment_label(fridge):
+    from problems.eval_perception import _confusion
+
+    per, graph, truth = fridge
+    counts, _, _ = _confusion(per, graph, truth)
+    env = sum(n for (a, b), n in counts.items() if b == "environment")
+    body = sum(n for (a, b), n in counts.items() if b == "body")
+    assert counts.get(("environment", "environment"), 0) >= 0.97 * env
+    assert counts.get(("environment", "body"), 0) <= 0.05 * body
+    # the static body is one part: the base holds most of the body's pixels
+    assert counts.get(("base", "body"), 0) >= 0.85 * body
