@@ -160,3 +160,28 @@ def test_rarely_seen_track_is_left_out():
     R[1, 3:] = np.nan
     res = infer_tree(PoseTracks(np.arange(T) * 0.1, ("door", "glimpse"), P, R))
     assert [(j.parent, j.child, j.type) for j in res.best.joints] == [("base", "door", "revolute")]
+
+
+def _hyp(kind, confidence, residual_rms, noise_sigma=1e-3):
+    from kinemaforge_opt.graph.fit import JointHypothesis
+
+    axis = None if kind == "rigid" else np.array([0.0, 0.0, 1.0])
+    return JointHypothesis(kind, axis, None if axis is None else np.zeros(3), axis, None if axis is None else np.zeros(3),
+                           0.0, None, np.zeros(T), residual_rms, 0.0, noise_sigma, 0.0, 0, 0, T, 0.0, confidence)
+
+
+def test_rigid_tree_edge_at_noise_level_joins_the_parent_part():
+    """The arborescence picks base->door (revolute), door->knob (rigid, residual at the noise
+    level: one link with the door) and base->sticker (rigid, misfitting by 20σ: kept as a visible
+    fixed joint, not silently merged)."""
+    from kinemaforge_opt.graph.tree import _tree
+
+    parts = {"base": ("world",), "door": ("door",), "knob": ("knob",), "sticker": ("sticker",)}
+    edges = {("base", "door"): {"revolute": _hyp("revolute", 0.9, 1e-3)},
+             ("door", "knob"): {"rigid": _hyp("rigid", 0.7, 2e-3)},
+             ("base", "sticker"): {"rigid": _hyp("rigid", 0.6, 2e-2)}}
+    tree = _tree("base", parts, edges, [("base", "door"), ("door", "knob"), ("base", "sticker")])
+    assert tree.parts == {"base": ("world",), "door": ("door", "knob"), "sticker": ("sticker",)}
+    assert sorted((j.parent, j.child, j.type) for j in tree.joints) == [("base", "door", "revolute"),
+                                                                         ("base", "sticker", "rigid")]
+    assert tree.log_score == pytest.approx(np.log(0.9) + np.log(0.7) + np.log(0.6))
