@@ -211,7 +211,9 @@ class ScrewResult:
     normalised defects, ``energy`` the soft penalty (× energy_weight) or, for the hard constraint,
     Σ (relative residual)² over the windows.  iterations: IPOPT iterations over all stages.
     success: every stage converged.  stages: per stage (name, iterations, success, seconds).
-    identified: which dynamic quantities were fitted.  notes: why a term was off."""
+    identified: which dynamic quantities were fitted.  notes: why a term was off (or cut short).
+    identifiability: per fitted dynamic parameter whether the data determine it
+    (:func:`dynamic_identifiability`); empty when none was fitted."""
 
     model: ArticulatedModel
     q: np.ndarray
@@ -223,6 +225,7 @@ class ScrewResult:
     time_s: float
     identified: tuple[str, ...]
     notes: tuple[str, ...]
+    identifiability: dict = field(default_factory=dict)
 
 
 # --- helpers ---------------------------------------------------------------------------------
@@ -718,6 +721,73 @@ def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
     return ScrewState(axes, origins, pitches, st.t.copy(), q, v, damping, coulomb, ratio)
 
 
+# A fitted damping / Coulomb coefficient counts as identified when its standard deviation is below
+# this fraction of its value (its 95 % interval then excludes 0 by ~2σ).
+IDENTIFIED_REL_STD = 0.5
+
+
+def dynamic_identifiability(sp: ScrewProblem, res: Result) -> dict:
+    """Which dynamic parameters of the dense solve the data determine, from the curvature of the
+    objective at the optimum: the Hessian of the objective (the assembled exact one, so only with
+    ``hessian="exact"`` / ``"gauss_newton"``) over the joint states and the parameters, the states
+    eliminated (Schur complement; the axes and origins held at their optimum, which the visual
+    term fixes far better), times the number of visual residuals (the objective's normaliser; each
+    term is ≈ ½ χ²) = the information matrix of the parameters, inverted to a covariance.
+
+    Returns {name: {"value", "std", "relative_std", "status"}, "correlation": {joint: ρ(damping,
+    Coulomb)}} in the NLP's variable units (damping and Coulomb scaled by the joint's force
+    scale: only ratios and correlations are meaningful).  status: "identified" (std below
+    IDENTIFIED_REL_STD × value), "not_identified", "at_bound" (fitted at 0) or, for an inertia
+    ratio, "prior_dominated" (the prior's information on it exceeds the data's) / "identified"."""
+    if sp.hess_lag is None or not np.isfinite(res.objective):
+        return {}
+    prob = sp.problem
+    vs, gs = prob.layout()
+    nw = sum(sl.stop - sl.start for sl in vs.values())
+    ng = sum(sl.stop - sl.start for sl in gs.values())
+    x = np.zeros(nw)
+    for name, sl in vs.items():
+        x[sl] = np.asarray(res.values[name], dtype=float).reshape(-1, order="F")
+    params = [n for n in vs if n.startswith(("damping:", "coulomb:", "inertia_ratio:"))]
+    if not params:
+        return {}
+    Hu = np.asarray(sp.hess_lag(x, [], 1.0, np.zeros(ng)).full())
+    H = Hu + Hu.T - np.diag(np.diag(Hu))
+    pidx = np.array([vs[n].start for n in params])
+    var = prob._vars["x"]
+    free = np.flatnonzero(var.lower < var.upper) + vs["x"].start
+    Hpp, Hpx, Hxx = H[np.ix_(pidx, pidx)], H[np.ix_(pidx, free)], H[np.ix_(free, free)]
+    ridge = 1e-12 * max(np.abs(np.diag(Hxx)).max(), 1e-30)
+    S = Hpp - Hpx @ np.linalg.solve(Hxx + ridge * np.eye(free.size), Hpx.T)
+    info = max(sp.n_vis, 1) * S
+    cov = np.linalg.pinv(info)
+    sigma = sp.options.inertia_prior_sigma
+    out = {}
+    for i, name in enumerate(params):
+        value = float(x[pidx[i]])
+        var_i = float(cov[i, i])
+        std = float(np.sqrt(var_i)) if var_i > 0 else float("inf")
+        rel = std / abs(value) if value != 0 else float("inf")
+        if name.startswith("inertia_ratio:"):
+            prior_info = (1 - np.log(value)) / (sigma**2 * value**2) if 0 < sigma < np.inf else 0.0
+            status = "prior_dominated" if info[i, i] - prior_info < prior_info else "identified"
+        elif value <= 1e-6 * max(abs(x[pidx]).max(), 1e-12) or prob._vars[name].lower[0] >= value - 1e-9:
+            status = "at_bound"
+        else:
+            status = "identified" if rel < IDENTIFIED_REL_STD else "not_identified"
+        finite = lambda v: float(v) if np.isfinite(v) else None  # noqa: E731 — JSON has no inf
+        out[name] = {"value": value, "std": finite(std), "relative_std": finite(rel), "status": status}
+    corr = {}
+    for j in sp.data.model.movable_joints:
+        a, b = f"damping:{j.name}", f"coulomb:{j.name}"
+        if a in params and b in params:
+            ia, ib = params.index(a), params.index(b)
+            d = np.sqrt(max(cov[ia, ia], 0) * max(cov[ib, ib], 0))
+            corr[j.name] = float(cov[ia, ib] / d) if d > 0 else None
+    out["correlation_damping_coulomb"] = corr
+    return out
+
+
 def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> ScrewResult:
     """Coarse-to-fine refinement of the closed-form joints in ``data`` (see module doc).
 
@@ -790,11 +860,18 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         terms["vis"] = vis_value(data, state, corr)
     identified = tuple(n.split(":", 1)[0] + ":" + n.split(":", 1)[1] for n in res.values
                        if n.startswith(("damping:", "coulomb:", "inertia_ratio:")))
+    try:
+        identifiability = dynamic_identifiability(sp, res) if identified else {}
+    except np.linalg.LinAlgError as e:  # a singular state block: report why, keep the fit
+        identifiability = {"error": f"{type(e).__name__}: {e}"}
+    t_stop = stop_impact_time(data.times, state.q[cols]) if sp.use_dyn and options.stop_impacts else np.inf
     if not sp.use_dyn:
         model = _without_fitted_dynamics(model, data.model)
+    if np.isfinite(t_stop):
+        notes.append(f"dyn, energy: a stop impact at {t_stop:.2f} s; the terms cover the recording before it")
     return ScrewResult(model, state.q[cols], state, terms, int(sum(s["iterations"] for s in stages)),
                        all(s["success"] for s in stages), tuple(stages), time.perf_counter() - start,
-                       identified, tuple(notes))
+                       identified, tuple(notes), identifiability)
 
 
 def refused_surfaces(data: ScrewData, state: ScrewState) -> ScrewData:

@@ -336,6 +336,7 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
         "options": dataclasses.asdict(options),
         "closed_form": [_line_record(n, lines[n]) for n in lines],
         "inertia_ratio": result.state.inertia_ratio,
+        "identifiability": result.identifiability,
     }
     return model, records, clouds_world, meshes, labels, doc, mass_report
 
