@@ -399,8 +399,9 @@ def stop_impact_time(times: np.ndarray, q: np.ndarray) -> float:
     """Time [s] from which the recording holds a stop impact: the frame before the first frame i
     at which a joint, after leaving its start, is within 2 % of its observed range of an end of
     that range, arrived there faster than STOP_MIN_SPEED × its peak speed, and its speed changed
-    over that frame more than STOP_DROP× as much as over any of the three frames before (a smooth
-    turn or a friction stop decelerates gradually; an impact at once); inf when there is none.
+    over that frame more than STOP_DROP× the median change over the three frames before (a smooth
+    turn or a friction stop decelerates gradually; an impact at once; the median, not the largest,
+    because at camera rate those frames may hold the end of a push); inf when there is none.
     times (T,) [s], q (T, n) [rad or m] at the observed frames."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     if q.shape[0] != times.size:
@@ -420,7 +421,7 @@ def stop_impact_time(times: np.ndarray, q: np.ndarray) -> float:
         for i in range(2, times.size - 1):
             if not (left[i] and (q[i, k] >= hi - tol or q[i, k] <= lo + tol)):
                 continue
-            before = dv[max(i - 4, 0):i - 1, k].max()
+            before = float(np.median(dv[max(i - 4, 0):i - 1, k]))
             if abs(v[i - 1, k]) > STOP_MIN_SPEED * peak and dv[i - 1, k] > STOP_DROP * before:
                 first = min(first, float(times[i - 1]))
             break
@@ -770,7 +771,10 @@ def dynamic_identifiability(sp: ScrewProblem, res: Result) -> dict:
         rel = std / abs(value) if value != 0 else float("inf")
         if name.startswith("inertia_ratio:"):
             prior_info = (1 - np.log(value)) / (sigma**2 * value**2) if 0 < sigma < np.inf else 0.0
-            status = "prior_dominated" if info[i, i] - prior_info < prior_info else "identified"
+            if not np.isfinite(std):  # the curvature there is not positive: nothing pins it
+                status = "not_identified"
+            else:
+                status = "prior_dominated" if info[i, i] - prior_info < prior_info else "identified"
         elif value <= 1e-6 * max(abs(x[pidx]).max(), 1e-12) or prob._vars[name].lower[0] >= value - 1e-9:
             status = "at_bound"
         else:
