@@ -504,7 +504,9 @@ def diagnose(
     nominal_z = {n: search["base"].nominal_z(n) for n in search["base"].blocks}
     v_scale = np.sqrt(np.mean(velocity_estimate(srch) ** 2, axis=0))
 
-    r_nom, q_s, v_s, a_s = inverse_dynamics_residual(model, fit_rec)  # the missing generalised force
+    # the missing generalised force, on the search grid (block means: full-rate accelerations are
+    # mostly differentiated noise, which the inertia column of the pre-screen then "explains")
+    r_nom, q_s, v_s, a_s = inverse_dynamics_residual(model, srch)
     id_force = _id_force(model, q_s, v_s, a_s)
 
     def trial_of(selected_: list[tuple[str, str]], start: Trial) -> Trial:
@@ -581,7 +583,9 @@ def diagnose(
             say(f"testing {effect} on {joint}")
             trial = trial_of([s[:2] for s in selected] + [(joint, effect)], current)
             names = _free_for(model, joint, effect)
-            size = float(np.sqrt(np.mean(((trial.q_fit - current.q_fit) / sigma_s) ** 2)))
+            # in units of the encoder noise of one recorded sample (not of the search grid's block
+            # means, whose noise is lower): whether an effect matters does not depend on the rate
+            size = float(np.sqrt(np.mean(((trial.q_fit - current.q_fit) / sigma_q) ** 2)))
             supported = trial.success and not _at_bound_values(trial, names, nominal_z)
             rows.append({"joint": joint, "type": effect, "trial": trial, "k": _n_params(names),
                          "value": _reported_value(model, joint, effect, trial.values),
@@ -597,7 +601,7 @@ def diagnose(
         # An effect must move the fit by more than the noise, and by more than what the round's
         # best hypothesis still leaves unexplained (the noise floor the data and library reach:
         # the high-frequency noise estimate can be low).
-        floor = max(1.0, float(np.sqrt(best_fit["rss"] / n_res)))
+        floor = max(1.0, float(np.sqrt(np.mean(((best_fit["trial"].q_fit - srch.q) / sigma_q) ** 2))))
         for r in rows:
             r["supported"] = r["supported"] and r["effect_size_sigma"] >= MIN_EFFECT_SIZE_SIGMA * floor
             r["delta_bic"] = float(n_eff * np.log(r["rss"] / rss0) + r["k"] * np.log(n_eff))
@@ -813,10 +817,14 @@ def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
         if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
             continue
         tol = max(5 * sigma[k], 0.01 * (lim.upper - lim.lower))
-        # ignore a start at rest on a stop: count a stop only once the joint has left its start
-        # (summing |Δq| would count noise as motion)
-        moved = np.maximum.accumulate(np.abs(rec.q[:, k] - rec.q[0, k])) > tol
-        hit |= moved & ((rec.q[:, k] <= lim.lower + tol) | (rec.q[:, k] >= lim.upper - tol))
+        # ignore a start on a stop: count a stop only once the joint has been clear of both stops
+        # (summing |Δq| would count noise as motion; a departure measured from the first,
+        # noisy, sample counted a slow start off the stop as reaching it)
+        # (clear = beyond twice the tolerance: a slow start wanders in and out of the band's edge)
+        q = rec.q[:, k]
+        near = (q <= lim.lower + tol) | (q >= lim.upper - tol)
+        clear = (q > lim.lower + 2 * tol) & (q < lim.upper - 2 * tol)
+        hit |= np.maximum.accumulate(clear) & near
     if not hit.any():
         return rec
     end = int(np.argmax(hit))
