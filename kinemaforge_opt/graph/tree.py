@@ -106,8 +106,22 @@ def _adequate_rigid(h: JointHypothesis) -> bool:
 
 def _merge(tracks: PoseTracks, fits) -> dict[str, tuple[str, ...]]:
     """Union–find over confident rigid pairs -> {part name: members}; the part holding the world
-    is named 'base', others after their first member."""
+    is named 'base', others after their first member.
+
+    Pairs are taken best-fitting first, and two groups join only when no pair across them
+    contradicts it (a fitted relation whose rigid fit misfits, see :func:`_adequate_rigid`): a
+    track seen only while two drawers both rest is rigid with each of them, and must not chain
+    drawers that move at different times into one part."""
     parent = {n: n for n in (WORLD,) + tracks.names}
+    members = {n: [n] for n in parent}
+
+    def contradicted(ra, rb):
+        for x in members[ra]:
+            for y in members[rb]:
+                for pair in ((x, y), (y, x)):
+                    if pair in fits and not _adequate_rigid(fits[pair]["rigid"]):
+                        return True
+        return False
 
     def find(x):
         while parent[x] != x:
@@ -115,15 +129,18 @@ def _merge(tracks: PoseTracks, fits) -> dict[str, tuple[str, ...]]:
             x = parent[x]
         return x
 
-    for (a, b), hyps in fits.items():
-        rigid = hyps["rigid"]
+    order = sorted(fits, key=lambda ab: fits[ab]["rigid"].residual_rms / max(fits[ab]["rigid"].noise_sigma, 1e-300))
+    for a, b in order:
+        rigid = fits[(a, b)]["rigid"]
         # Confident *and* adequate: rigid is the most probable type and its residual is at the
         # noise level (when no type fits, rigid can win by default; that is no reason to merge).
         if rigid.confidence >= MERGE_PROBABILITY and _adequate_rigid(rigid):
             ra, rb = find(a), find(b)
-            if ra != rb:
+            if ra != rb and not contradicted(ra, rb):
                 keep = WORLD if WORLD in (ra, rb) else min(ra, rb)
-                parent[rb if keep == ra else ra] = keep
+                gone = rb if keep == ra else ra
+                parent[gone] = keep
+                members[keep] += members.pop(gone)
     groups: dict[str, list[str]] = {}
     for n in parent:
         groups.setdefault(find(n), []).append(n)
