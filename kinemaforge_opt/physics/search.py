@@ -25,6 +25,10 @@ from ..nlp.joint_space import build_joint_space_fit
 from .effects import EFFECTS
 
 EXPAND = True
+# CPU budget of one hypothesis solve: this many derivative evaluations (timed at build), at least
+# 1 s.  Converging fits need 5-40 iterations of about one evaluation each on long recordings; a
+# fit that spends more is in a restoration phase or ill-conditioned (a Stribeck speed near zero).
+CPU_CAP_EVALUATIONS = 100
 # Extra IPOPT options of every hypothesis solve (``"ipopt.<name>": value``).
 IPOPT_OPTIONS: dict = {}
 
@@ -223,7 +227,7 @@ class _StructuredNLP:
         jac_fn = ca.Function("nlp_jac_g", [w, p], [g, jac], ["x", "p"], ["g", "jac_g_x"])
         hess_fn = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"],
                               ["triu_hess_gamma_x_x"])
-        # Bound the CPU time of a solve by max_iter iterations of typical cost (one Hessian and
+        # Bound the CPU time of a solve by min(max_iter, CPU_CAP_EVALUATIONS) iterations of typical cost (one Hessian and
         # one Jacobian evaluation, timed here, the bulk of an iteration): a hypothesis that
         # sends IPOPT into a long restoration phase is abandoned (not converged) instead of
         # costing minutes.
@@ -234,7 +238,7 @@ class _StructuredNLP:
         hess_fn(w_probe, [], 1.0, np.zeros(ng))
         jac_fn(w_probe, [])
         t_eval = _time.process_time() - t0
-        self.max_cpu_s = max(1.0, max_iter * t_eval) if max_cpu_s is None else float(max_cpu_s)
+        self.max_cpu_s = max(1.0, min(max_iter, CPU_CAP_EVALUATIONS) * t_eval) if max_cpu_s is None else float(max_cpu_s)
         opts = {"ipopt.max_iter": max_iter, "ipopt.tol": tol, "ipopt.print_level": print_level, "print_time": False,
                 "ipopt.sb": "yes", "jac_g": jac_fn, "hess_lag": hess_fn,
                 "ipopt.max_cpu_time": self.max_cpu_s, **IPOPT_OPTIONS}
