@@ -739,7 +739,8 @@ def dynamic_identifiability(sp: ScrewProblem, res: Result) -> dict:
     Coulomb)}} in the NLP's variable units (damping and Coulomb scaled by the joint's force
     scale: only ratios and correlations are meaningful).  status: "identified" (std below
     IDENTIFIED_REL_STD × value), "not_identified", "at_bound" (fitted at 0) or, for an inertia
-    ratio, "prior_dominated" (the prior's information on it exceeds the data's) / "identified"."""
+    ratio, "prior_dominated" (the prior's information on it exceeds the data's, marginally over the
+    other parameters) / "identified" / "not_identified" (no positive curvature)."""
     if sp.hess_lag is None or not np.isfinite(res.objective):
         return {}
     prob = sp.problem
@@ -774,7 +775,8 @@ def dynamic_identifiability(sp: ScrewProblem, res: Result) -> dict:
             if not np.isfinite(std):  # the curvature there is not positive: nothing pins it
                 status = "not_identified"
             else:
-                status = "prior_dominated" if info[i, i] - prior_info < prior_info else "identified"
+                # marginal precision 1/var = data's + prior's: the prior dominates when the data add less
+                status = "prior_dominated" if 1.0 / var_i < 2 * prior_info else "identified"
         elif value <= 1e-6 * max(abs(x[pidx]).max(), 1e-12) or prob._vars[name].lower[0] >= value - 1e-9:
             status = "at_bound"
         else:

@@ -182,3 +182,14 @@ def test_helical_pitch_is_recovered():
     j = r.model.joint("hinge")
     assert j.pitch == pytest.approx(0.05, abs=1e-3)
     assert _errors(r.model)[0] < 0.1
+
+
+def test_weakly_weighted_dynamics_leave_the_inertia_to_its_prior(pushed):
+    """The same push with the dynamics defects trusted 30× less (dyn_sigma 3 instead of 0.1) and
+    no energy term: the data no longer pin the inertia scale (the factor-2 prior holds it at the
+    mesh's value) nor the damping, and the report says so."""
+    true, data, q = pushed
+    r = refine_screws(data, ScrewOptions(energy="off", substep_s=FINE, dyn_sigma=3.0))
+    ident = r.identifiability
+    assert ident["inertia_ratio:door"]["status"] == "prior_dominated"
+    assert ident["damping:hinge"]["status"] == "not_identified"
