@@ -3,8 +3,11 @@
 ``diagnose(model, recording)``:
 1. fits the nominal model (only the initial state is free) and locates where the residual sits
    (:mod:`.locate`);
-2. explains it by stepwise selection over the effect library.  Every hypothesis (a set of
-   (joint, effect) pairs) is a fit of one shared collocation NLP built once per recording
+2. explains it by stepwise selection over the effect library, on block means of the fit span
+   sampled at ``SEARCH_RATE_HZ`` or more (a faster recording is averaged down; its noise level is
+   re-estimated there).  Per round only ``SCREEN`` hypotheses, ranked by a linear
+   inverse-dynamics pre-screen, plus those the previous round found strong, get an NLP fit.
+   Every hypothesis (a set of (joint, effect) pairs) is a fit of one shared collocation NLP built once per recording
    (:mod:`.search`; effects left out are fixed at their "off" values), with physical sign bounds
    and identifiability bounds (a stop inside the half of the recorded range on its side, a
    Stribeck speed below half the peak speed), states started from the data, and force effects
@@ -21,8 +24,9 @@
    the final set leaves residual above the located-mismatch level (model-form error the library
    cannot express), the set must also predict the held-out span better than the nominal model,
    else effects are dropped (and the summary says the held-out span was used);
-3. re-fits the model with every selected effect (95 % intervals from the fit's sensitivity) and
-   writes the augmented model;
+3. re-fits the nominal model and the model with every selected effect at the full rate (started
+   from their search-grid solutions; 95 % intervals from the fit's sensitivity), drops an effect
+   the model lacked whose interval holds its "off" value, and writes the augmented model;
 4. shows the fit before vs after on a held-out later span: each model starts from its own
    least-squares state over the first ``STATE_WINDOW_S`` of a span and predicts the rest under
    the recorded forcing.
