@@ -153,6 +153,8 @@ class MainDemoReport:
                    f"  axis error {j['axis_error_deg']:.2f}°, origin error {100 * j['origin_error_m']:.1f} cm "
                    f"(true joint {j['true_joint']})")
             lines.append(f"  {j['name']}: {j['type']} {j['parent']} -> {j['child']}{err}")
+            if j.get("dynamics"):
+                lines.append("    fitted by the screw NLP: " + _dynamics_words(j))
         v = self.verification
 
         def drift(check: dict) -> str:
@@ -192,6 +194,18 @@ def _true_lines(true_model, q: np.ndarray) -> dict[str, tuple[np.ndarray, np.nda
         T = data.oMi[pm.getJointId(j.name)]
         out[j.name] = (T.rotation @ (np.asarray(j.axis) / np.linalg.norm(j.axis)), T.translation.copy())
     return out
+
+
+def _dynamics_words(joint: dict) -> str:
+    """The joint's fitted damping and Coulomb friction with the NLP's verdict on each, e.g.
+    "damping 0.61 N·m·s/rad (identified), Coulomb 0.23 N·m (not_identified)"."""
+    unit = {"revolute": ("N·m·s/rad", "N·m"), "prismatic": ("N·s/m", "N")}.get(joint["type"], ("", ""))
+    status = joint.get("identifiability", {})
+    words = []
+    for (key, label), u in zip((("damping", "damping"), ("coulomb", "Coulomb")), unit):
+        verdict = status.get(f"{key}:{joint['name']}", {}).get("status")
+        words.append(f"{label} {joint['dynamics'][key]:.3g} {u}" + (f" ({verdict.replace('_', ' ')})" if verdict else ""))
+    return ", ".join(words)
 
 
 def _match_joints(records: list[dict], true_lines: dict, true_types: dict) -> list[dict]:
@@ -294,7 +308,11 @@ def run_main_demo(out_dir: str | Path, seed: int = 0, frames: int = DEMO_SIZE["f
     t_zero = verification["zero_step_t_s"]  # the reconstruction's q = 0
     q_true = np.array([np.interp(t_zero, truth_rec.t, truth_rec.q[:, k]) for k in range(true_model.nq)])
     truth_doc = json.loads(Path(paths.effects).read_text(encoding="utf-8"))
-    joints = _match_joints(rec.document["joints"], _true_lines(true_model, q_true),
+    identifiability = rec.document.get("nlp", {}).get("identifiability", {})
+    joints = _match_joints([{**j, "identifiability": {k: v for k, v in identifiability.items()
+                                                      if k.endswith(":" + j["name"])}}
+                            for j in rec.document["joints"]],
+                           _true_lines(true_model, q_true),
                            {j.name: j.type for j in true_model.movable_joints})
     diag_doc = json.loads(Path(written["diagnosis"]).read_text(encoding="utf-8"))
     report = MainDemoReport(
