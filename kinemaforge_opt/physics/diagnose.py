@@ -34,7 +34,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -85,6 +85,10 @@ SEARCH_RATE_HZ = 30.0
 # reduce the inverse-dynamics residual force in a linear least-squares pre-screen (a ranking, not
 # evidence: the NLP fit and its ΔBIC still decide).
 SCREEN = 5
+
+# Per selection round, at most this many hypotheses below the model-form floor (strongest ΔBIC
+# first) are judged by their prediction of another recording (``prediction_gate`` in ``diagnose``).
+PREDICTION_TRIES = 3
 
 # How many times a selection round may be re-run after the chosen effects were re-fitted to a
 # better optimum from a candidate's solution (see ``diagnose``).
@@ -148,6 +152,22 @@ class Diagnosis:
     held_out: HeldOut | None
     held_out_others: tuple[HeldOut, ...] = ()
     held_out_used_for_selection: bool = False  # True when model-form error forced a held-out check
+    # The prediction check that model-form error forced (see ``diagnose``): ``{"span": "held_out" |
+    # "other_recording_<k>" (1-based) | None, "reason": str, "signal_sigma": {span: nominal
+    # prediction RMS / noise}}``; None when no such check was needed.
+    acceptance_check: dict | None = None
+    # Effects the search selected and a later check dropped: {check: ["<type> on <joint>", ...]},
+    # check one of "simulation_check", "acceptance_check", "interval_check".
+    dropped: dict = field(default_factory=dict)
+
+    @property
+    def other_used_for_selection(self) -> int | None:
+        """0-based index into ``held_out_others`` of the recording that judged acceptance, or None."""
+        check = self.acceptance_check or {}
+        for span in (check.get("span") or "", check.get("gate_span") or ""):
+            if span.startswith("other_recording_"):
+                return int(span.rsplit("_", 1)[1]) - 1
+        return None
 
     def summary(self) -> str:
         """A plain-words account for the terminal."""
@@ -156,26 +176,61 @@ class Diagnosis:
             where = ", ".join(f"{a:.2f}–{b:.2f} s" for a, b in m.windows_s[:4]) or "nowhere above 3σ"
             lines.append(f"joint {m.joint}: {100 * m.share_of_residual:.0f}% of the residual, "
                          f"RMS {m.rms_over_noise:.1f}× noise; windows: {where}")
-        if not self.effects and self.held_out_used_for_selection:
-            lines.append("no effect of the library both explains the recording (ΔBIC threshold "
-                         f"{DELTA_BIC:g}) and predicts the held-out span better: the remaining mismatch is "
-                         "model-form error the library cannot express")
+        dropped = {c: ", ".join(e.replace("_", " ") for e in v) for c, v in self.dropped.items() if v}
+        check = self.acceptance_check or {}
+        if not self.effects and dropped.get("interval_check"):
+            lines.append(f"the search selected {dropped['interval_check']}, but the full-rate re-fit's 95% interval "
+                         "holds the effect's off value (no force, unit inertia ratio, nominal axis): the data do not "
+                         "support it, so no effect is reported")
+        elif not self.effects and dropped.get("acceptance_check"):
+            lines.append(f"no effect of the library both explains the recording (ΔBIC threshold {DELTA_BIC:g}) and "
+                         f"predicts the {_span_words(check.get('span'))} better (dropped: "
+                         f"{dropped['acceptance_check']}): the remaining mismatch is model-form error the library "
+                         "cannot express")
+        elif not self.effects and dropped.get("simulation_check"):
+            lines.append(f"the search selected {dropped['simulation_check']}, but the selection did not simulate the "
+                         "fit span better than the nominal model: no effect is reported")
         elif not self.effects:
             lines.append("no effect is supported by the data (ΔBIC threshold "
                          f"{DELTA_BIC:g}): the nominal model explains the recording to its noise level")
         for e in self.effects:
             lines.append(f"missing physics on {e.joint}: {e.type.replace('_', ' ')} = {e.value:.4g} {e.unit} "
                          f"(95% [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]), ΔBIC {e.delta_bic:.0f}")
+        for c, words in (("simulation_check", "simulating the fit span no better"),
+                         ("acceptance_check", f"predicting the {_span_words(check.get('span'))} no better"),
+                         ("interval_check", "its 95% interval holding the off value")):
+            if self.effects and dropped.get(c):
+                lines.append(f"dropped {dropped[c]}: {words}")
+        used = self.other_used_for_selection
         for k, h in enumerate(self.held_out_others):
-            lines.append(f"other recording {k + 1}: prediction RMS before {h.rms_before:.4g}, after {h.rms_after:.4g}")
+            note = " (used to accept the effects: not independent)" if k == used else ""
+            lines.append(f"other recording {k + 1}: prediction RMS before {h.rms_before:.4g}, after {h.rms_after:.4g}{note}")
         if self.held_out is not None:
             lines.append(f"held-out prediction RMS: before {self.held_out.rms_before:.4g}, after "
                          f"{self.held_out.rms_after:.4g} (×{self.held_out.rms_before / max(self.held_out.rms_after, 1e-12):.1f} better)")
-            if self.held_out_used_for_selection:
-                lines.append("(the residual stays far above the noise whatever effect is added — model-form error the "
-                             "effect library cannot express — so effects were accepted only if they also predicted the "
-                             "held-out span better: that span is not independent here)")
+        for key in ("gate_reason", "reason"):
+            if check.get(key):
+                lines.append(f"({check[key]})")
         return "\n".join(lines)
+
+
+def _span_words(span: str | None) -> str:
+    """Plain words for an acceptance-check span name ("held_out", "other_recording_<k>")."""
+    if span == "held_out":
+        return "held-out span"
+    if span and span.startswith("other_recording_"):
+        return f"other recording {span.rsplit('_', 1)[1]}"
+    return "held-out span"
+
+
+def prediction_signal(h: HeldOut, sigma_q: np.ndarray) -> float:
+    """How far the nominal ("before") prediction of a span errs, in noise sigmas: the largest
+    per-joint RMS of (q_before - q_rec) / sigma_q.  Below THRESHOLD_SIGMA the span shows nothing
+    the nominal model gets wrong (e.g. a pendulum at rest at encoder resolution), so no effect can
+    predict it better: it cannot judge one."""
+    if h.t.size == 0:
+        return 0.0
+    return float(np.max(np.sqrt(np.mean((h.q_before - h.q_rec) ** 2, axis=0)) / np.maximum(sigma_q, 1e-12)))
 
 
 def search_decimation(rec: Recording) -> int:
@@ -561,6 +616,51 @@ def diagnose(
         names = [n for j, e in effects_ for n in _free_for(model, j, e)]
         return fit_for(effects_).solve(names, start=start, bounds={n: b for n, b in (start.bounds or {}).items() if n in names})
 
+    nominal_model = _model_of(model, nominal_trial)
+    # The prediction gate's judge (``prediction_gate``): the first other recording whose nominal
+    # prediction errs by THRESHOLD_SIGMA noise sigmas or more, found on first use.
+    judge: dict = {}
+
+    def judge_span() -> tuple[str, Recording] | None:
+        if "span" not in judge:
+            judge["span"] = None
+            for k, o in enumerate(other_recordings):
+                span = match_recording(model, o)
+                say(f"checking whether other recording {k + 1} can judge effects below the model-form floor")
+                h = predict_before_after(nominal_model, nominal_model, span, segment_s)
+                judge.setdefault("signal_sigma", {})[f"other_recording_{k + 1}"] = prediction_signal(h, sigma_q)
+                if prediction_signal(h, sigma_q) >= THRESHOLD_SIGMA:
+                    judge["span"] = (f"other_recording_{k + 1}", span)
+                    break
+        return judge["span"]
+
+    def prediction_rms_sigma(m: ArticulatedModel, span: Recording) -> float:
+        """Noise-normalised RMS of ``m``'s prediction of ``span`` (pooled over joints)."""
+        h = predict_before_after(m, m, span, segment_s)
+        return float(np.sqrt(np.mean(((h.q_after - h.q_rec) / np.maximum(sigma_q, 1e-12)) ** 2)))
+
+    def prediction_gate(rows_: list[dict]) -> dict | None:
+        """The first of ``rows_`` (hypotheses with ΔBIC below DELTA_BIC whose effect on the fit is
+        above the noise but below the model-form floor) that predicts the judge recording better
+        than the current selection by more than MIN_EFFECT_SIZE_SIGMA noise sigmas, or None.
+        An effect the system has shows in every recording of it; polishing one recording's
+        model-form error does not carry over to another."""
+        js = judge_span()
+        if js is None:
+            return None
+        name, span = js
+        base = prediction_rms_sigma(_model_of(model, current), span)
+        for r in rows_:
+            say(f"predicting {_span_words(name)} with {r['type']} on {r['joint']}")
+            new = prediction_rms_sigma(_model_of(model, r["trial"]), span)
+            ok_ = base - new >= MIN_EFFECT_SIZE_SIGMA
+            tested.append({"prediction_gate": f"{r['type']} on {r['joint']}", "span": name,
+                           "prediction_rms_sigma": [base, new], "passed": ok_})
+            if ok_:
+                judge["used"] = True
+                return r
+        return None
+
     selected: list[tuple[str, str, float]] = []  # (joint, effect, delta_bic)
     equivalents: dict[tuple[str, str], list[dict]] = {}
     tested: list[dict] = []
@@ -607,6 +707,7 @@ def diagnose(
         # the high-frequency noise estimate can be low).
         floor = max(1.0, float(np.sqrt(np.mean(((best_fit["trial"].q_fit - srch.q) / sigma_q) ** 2))))
         for r in rows:
+            r["below_floor"] = r["supported"] and MIN_EFFECT_SIZE_SIGMA <= r["effect_size_sigma"] < MIN_EFFECT_SIZE_SIGMA * floor
             r["supported"] = r["supported"] and r["effect_size_sigma"] >= MIN_EFFECT_SIZE_SIGMA * floor
             r["delta_bic"] = float(n_eff * np.log(r["rss"] / rss0) + r["k"] * np.log(n_eff))
             tested.append({"joint": r["joint"], "type": r["type"], "value": r["value"], "delta_bic": r["delta_bic"],
@@ -614,10 +715,19 @@ def diagnose(
                            "iterations": r["trial"].iterations, "status": r["trial"].status, "n_eff": n_eff,
                            "residual_floor_sigma": floor})
         ok = [r for r in rows if r["supported"]]
-        if not ok:
-            break
         strong = sorted((r for r in ok if r["delta_bic"] < DELTA_BIC), key=lambda r: r["delta_bic"])
+        # Below the model-form floor: strong evidence (ΔBIC) and a fit moved by more than the noise,
+        # but by less than the model-form error the round's best fit still leaves.  The fit span
+        # alone cannot tell such an effect from polishing that error; another recording of the
+        # system can (see ``prediction_gate``).
+        gated = sorted((r for r in rows if r["below_floor"] and r["delta_bic"] < DELTA_BIC), key=lambda r: r["delta_bic"])
         strong_before = {(r["joint"], r["type"]) for r in strong}
+        if not strong and gated and other_recordings:
+            strong_before |= {(r["joint"], r["type"]) for r in gated}
+            passed = prediction_gate(gated[:PREDICTION_TRIES])
+            if passed is not None:
+                strong = [{**passed, "supported": True}]
+                ok = ok + strong
         if not strong:
             break
         best = strong[0]
@@ -695,21 +805,25 @@ def diagnose(
                 del selected[i]
                 current = trial
 
-    nominal_model = _model_of(model, nominal_trial)
+    dropped: dict[str, list[str]] = {}
 
     def drop_until_better(span: Recording, span_s: float | None, droppable: list[int], check: str, rms_key: str,
-                          doing: str) -> None:
+                          doing: str, stage: str, first: HeldOut | None = None) -> None:
         """Drop selected effects, the last of ``droppable`` (indices into ``selected``) first,
         until the selection simulates ``span`` better than the nominal model (or none is left).
-        ``doing``: progress text, formatted with the number of effects ``n``."""
+        ``doing``: progress text, formatted with the number of effects ``n``; ``stage``: the key
+        of ``dropped`` the dropped effects are listed under; ``first``: the current selection's
+        prediction of ``span`` if already made."""
         nonlocal current
         while droppable:
             say(doing.format(n=len(selected)))
-            h = predict_before_after(nominal_model, _model_of(model, current), span, span_s)
+            h = first or predict_before_after(nominal_model, _model_of(model, current), span, span_s)
+            first = None
             tested.append({check: [f"{e} on {j}" for j, e, _ in selected], rms_key: [h.rms_before, h.rms_after]})
             if h.rms_after < h.rms_before:
                 return
             joint, effect, _ = selected.pop(droppable.pop())
+            dropped.setdefault(stage, []).append(f"{effect} on {joint}")
             say(f"dropped {effect} on {joint}: its simulation got no better")
             equivalents.pop((joint, effect), None)
             current = trial_of([x[:2] for x in selected], nominal_trial) if selected else nominal_trial
@@ -722,18 +836,52 @@ def diagnose(
     # the fit alone: it is not part of an ArticulatedModel, so the simulation cannot show it.
     drop_until_better(srch, segment_s or SIMULATION_CHECK_S,
                       [k for k, x in enumerate(selected) if x[1] != "limit_contact"],
-                      "simulation_check", "fit_span_simulated_rms", "simulating the fit span with {n} effect(s)")
+                      "simulation_check", "fit_span_simulated_rms", "simulating the fit span with {n} effect(s)",
+                      "simulation_check")
 
     floor_final = float(np.sqrt(_rss_q(current.q_fit, srch.q, sigma_s) / n_res))
-    if selected and floor_final > THRESHOLD_SIGMA and held is not None:
+    acceptance = None
+    if selected and floor_final > THRESHOLD_SIGMA:
         # Even with every selected effect the fit stays above the located-mismatch level: the
         # output error is dominated by model-form error the library cannot express, and its
         # likelihood is no longer evidence for specific effects.  Then the selection must also
-        # predict the held-out span better than the nominal model, else effects are dropped as
-        # above.  The held-out figure is then no longer independent (the summary says so).
-        judged_by_held_out = True
-        drop_until_better(held, segment_s, list(range(len(selected))), "held_out_check", "held_out_rms",
-                          "checking {n} effect(s) on the held-out span")
+        # predict data outside the fit better than the nominal model, else effects are dropped as
+        # above.  That data is the held-out span if the nominal model's prediction of it errs by
+        # more than THRESHOLD_SIGMA noise sigmas (else it shows nothing an effect could predict
+        # better, e.g. a system come to rest), otherwise the first other recording that does;
+        # the span used is then no longer independent (the summary and diagnosis.json say which),
+        # the remaining other recordings stay independent.  If no span carries such a signal the
+        # check is skipped, and said so.
+        spans = ([("held_out", held)] if held is not None else []) + \
+            [(f"other_recording_{k + 1}", match_recording(model, o)) for k, o in enumerate(other_recordings)]
+        signal = {}
+        for name, span in spans:
+            say(f"checking whether the {_span_words(name)} can judge the effects")
+            h = predict_before_after(nominal_model, _model_of(model, current), span, segment_s)
+            signal[name] = prediction_signal(h, sigma_q)
+            if signal[name] < THRESHOLD_SIGMA:
+                continue
+            judged_by_held_out = name == "held_out"
+            acceptance = {"span": name, "signal_sigma": signal, "fit_rms_sigma": floor_final, "reason": (
+                f"the fit stays {floor_final:.0f}x the noise whatever effect is added — model-form error the effect "
+                f"library cannot express — so effects were accepted only if they also predicted the {_span_words(name)} "
+                f"better (its nominal prediction errs by {signal[name]:.0f} sigma): that span is not independent here")}
+            drop_until_better(span, segment_s, list(range(len(selected))), "acceptance_check", "prediction_rms",
+                              f"checking {{n}} effect(s) on the {_span_words(name)}", "acceptance_check", first=h)
+            break
+        else:
+            acceptance = {"span": None, "signal_sigma": signal, "fit_rms_sigma": floor_final, "reason": (
+                f"the fit stays {floor_final:.0f}x the noise, but no span outside the fit ("
+                + (", ".join(f"{_span_words(n)}: nominal prediction error {x:.1f} sigma" for n, x in signal.items())
+                   or "none given") + f") errs by {THRESHOLD_SIGMA:g} sigma or more, so none can show an effect: "
+                "the effects are judged by the fit span alone (ΔBIC, effect size, simulation check)")}
+    if judge.get("used"):
+        gate = judge["span"][0]
+        acceptance = {"span": None, "reason": "", **(acceptance or {}), "gate_span": gate,
+                      "gate_signal_sigma": judge.get("signal_sigma", {}), "gate_reason": (
+                          f"effects that moved the fit by more than the noise but less than the model-form error were "
+                          f"accepted only if they predicted {_span_words(gate)} better by more than the noise: "
+                          "that recording is not independent here")}
 
     say("re-fitting with the selected effects" + ("" if k_dec == 1 else f" at the full {1 / fit_rec.dt:.0f} Hz"))
     chosen = [s[:2] for s in selected]
@@ -763,6 +911,7 @@ def diagnose(
         joint, effect, _ = selected.pop(i)
         say(f"dropped {effect} on {joint}: its 95% interval holds its off value")
         tested.append({"interval_check": f"{effect} on {joint}", "dropped": True})
+        dropped.setdefault("interval_check", []).append(f"{effect} on {joint}")
         equivalents.pop((joint, effect), None)
         chosen = [s[:2] for s in selected]
         names = [n for j, e in chosen for n in _free_for(model, j, e)]
@@ -807,7 +956,8 @@ def diagnose(
         say(f"predicting other recording {k + 1}/{len(other_recordings)}")
         others.append(predict_before_after(model, final.model, match_recording(model, other), segment_s))
     return Diagnosis(tuple(mismatch), tuple(found), tuple(tested), nominal, final, final.model, held_out, tuple(others),
-                     held_out_used_for_selection=judged_by_held_out)
+                     held_out_used_for_selection=judged_by_held_out, acceptance_check=acceptance,
+                     dropped=dropped)
 
 
 def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:

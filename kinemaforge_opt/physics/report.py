@@ -45,6 +45,10 @@ def diagnosis_dict(d: Diagnosis, drift_m: dict | None = None) -> dict:
         "tested": list(d.tested),
         "fit": fit,
         "held_out_used_for_selection": d.held_out_used_for_selection,
+        "acceptance_check": d.acceptance_check,
+        "dropped": d.dropped,
+        "others": [{"rms_before": h.rms_before, "rms_after": h.rms_after,
+                    "used_for_selection": k == d.other_used_for_selection} for k, h in enumerate(d.held_out_others)],
     }
 
 

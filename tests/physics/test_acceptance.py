@@ -1,0 +1,61 @@
+"""The prediction check that model-form error forces on ``diagnose``: which span can judge effects
+(``prediction_signal``), and the plain-words summary of what each check dropped."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinemaforge_opt.physics.diagnose import Diagnosis, FoundEffect, HeldOut, prediction_signal
+
+
+def _held(err_per_joint, T=200):
+    """A span whose nominal prediction errs by a sinusoid of RMS ``err_per_joint`` [rad] per joint."""
+    t = np.linspace(0.0, 2.0, T)
+    q = np.zeros((T, len(err_per_joint)))
+    wave = np.sqrt(2.0) * np.sin(2 * np.pi * 5 * t)[:, None]  # RMS 1 over whole periods
+    return HeldOut(t, q, q + wave * np.asarray(err_per_joint), q)
+
+
+def test_prediction_signal_is_the_worst_joint_error_in_noise_sigmas():
+    sigma = np.array([0.002, 0.001])
+    # joint 0 errs by 0.004 rad = 2 sigma, joint 1 by 0.005 rad = 5 sigma: the span shows 5 sigma
+    assert prediction_signal(_held([0.004, 0.005]), sigma) == pytest.approx(5.0, rel=1e-2)
+    # a system at rest that the nominal model predicts to the noise cannot judge an effect
+    assert prediction_signal(_held([0.001, 0.0005]), sigma) < 3.0
+    assert prediction_signal(HeldOut(np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2))), sigma) == 0.0
+
+
+def _diagnosis(effects=(), dropped=None, acceptance=None, held_out_used=False, others=()):
+    return Diagnosis((), tuple(effects), (), None, None, None, None, tuple(others),
+                     held_out_used_for_selection=held_out_used, acceptance_check=acceptance, dropped=dropped or {})
+
+
+def test_summary_blames_the_interval_check_when_it_dropped_every_effect():
+    d = _diagnosis(dropped={"interval_check": ["viscous_damping on j0"]}, held_out_used=True,
+                   acceptance={"span": "held_out", "reason": "held-out span judged", "signal_sigma": {}})
+    text = d.summary()
+    assert "viscous damping on j0" in text and "95% interval holds the effect's off value" in text
+    assert "predicts the held-out span better" not in text
+
+
+def test_summary_blames_the_acceptance_check_and_names_its_span():
+    h = _held([0.01, 0.01])
+    d = _diagnosis(dropped={"acceptance_check": ["spring on j0"]}, others=(h, h),
+                   acceptance={"span": "other_recording_2", "reason": "judged on other recording 2", "signal_sigma": {}})
+    text = d.summary()
+    assert "predicts the other recording 2 better (dropped: spring on j0)" in text
+    assert d.other_used_for_selection == 1
+    lines = [ln for ln in text.splitlines() if ln.startswith("other recording")]
+    assert "not independent" in lines[1] and "not independent" not in lines[0]
+
+
+def test_summary_lists_effects_a_check_dropped_beside_those_kept():
+    kept = FoundEffect("j0", "viscous_damping", 0.2, "N*m*s/rad", (0.18, 0.22), -50.0, {})
+    d = _diagnosis(effects=[kept], dropped={"interval_check": ["axis_tilt on j0"]},
+                   acceptance={"span": None, "reason": "no span outside the fit can show an effect", "signal_sigma": {}})
+    text = d.summary()
+    assert "missing physics on j0: viscous damping" in text
+    assert "dropped axis tilt on j0: its 95% interval holding the off value" in text
+    assert "(no span outside the fit can show an effect)" in text
+    assert d.other_used_for_selection is None
