@@ -13,6 +13,12 @@ what it does:
      those with ΔBIC < -10 that move the fit by more than the noise;
   3. re-fits with them and writes the augmented model;
   4. compares nominal vs augmented on the held-out last part of the recording and in Drake.
+  When the fit stays far above the noise with any effect (model-form error the library cannot
+  express), the effects must also predict data outside the fit better: the held-out span if the
+  nominal model errs there by 3 noise sigmas or more, else the first --other recording that does
+  (it is then not independent; the summary and diagnosis.json "acceptance_check" say which).
+  With --other, an effect that is strong by ΔBIC but smaller than that model-form error is
+  accepted only if it predicts the first such --other recording better by more than the noise.
 
 on a reconstruction (first argument = a folder written by `kinemaforge reconstruct SEQ -o R`):
   the joint-space recording is built from it: q per time step from R/tracks.csv (the part
@@ -54,7 +60,8 @@ def register(sub) -> None:
     p.add_argument("--segment", type=float, default=None, metavar="S",
                    help="fit and predict in segments of S seconds (long oscillating recordings)")
     p.add_argument("--other", nargs="*", default=(), metavar="CSV",
-                   help="further recordings of the same system, used only to compare predictions")
+                   help="further recordings of the same system: compared before/after; under model-form error "
+                        "the first one with signal also judges acceptance (see below)")
     p.set_defaults(func=run)
 
 

@@ -22,8 +22,17 @@
    within ``EQUIVALENT_LOGLIK``) are reported with it (``params["equivalent"]``): e.g. a
    prismatic joint's axis tilt and a constant bias are the same force in joint space.  When even
    the final set leaves residual above the located-mismatch level (model-form error the library
-   cannot express), the set must also predict the held-out span better than the nominal model,
-   else effects are dropped (and the summary says the held-out span was used);
+   cannot express), the set must also predict data outside the fit better than the nominal model,
+   else effects are dropped: the held-out span if it shows signal (the nominal prediction of it
+   errs by ``THRESHOLD_SIGMA`` noise sigmas or more; a system come to rest shows none), else the
+   first other recording (``other_recordings``) that does, else the check is skipped; the summary
+   and ``Diagnosis.acceptance_check`` say which span was used (it is then not independent).
+   With other recordings given, a round whose only strong hypotheses (ΔBIC < ``DELTA_BIC``, fit
+   moved by more than the noise) fall below the model-form floor lets up to
+   ``PREDICTION_TRIES`` of them, strongest first, be judged by that first other recording
+   instead: the first that predicts it better by more than the noise is accepted (an effect the
+   system has shows in every recording of it; polishing one recording's model-form error does
+   not carry over to another);
 3. re-fits the nominal model and the model with every selected effect at the full rate (started
    from their search-grid solutions; 95 % intervals from the fit's sensitivity), drops an effect
    the model lacked whose interval holds its "off" value, and writes the augmented model;
@@ -662,6 +671,7 @@ def diagnose(
         return None
 
     selected: list[tuple[str, str, float]] = []  # (joint, effect, delta_bic)
+    gated_in: set[tuple[str, str]] = set()  # selected through prediction_gate
     equivalents: dict[tuple[str, str], list[dict]] = {}
     tested: list[dict] = []
     current = nominal_trial
@@ -727,6 +737,7 @@ def diagnose(
             passed = prediction_gate(gated[:PREDICTION_TRIES])
             if passed is not None:
                 strong = [{**passed, "supported": True}]
+                gated_in.add((passed["joint"], passed["type"]))
                 ok = ok + strong
         if not strong:
             break
@@ -763,7 +774,7 @@ def diagnose(
         for i in range(len(selected) - 1):
             keep = [x[:2] for k, x in enumerate(selected) if k != i]
             k_old = _n_params(_free_for(model, *selected[i][:2]))
-            swap = None
+            swap, swaps = None, []
             others = [(j, e) for j in model.joint_names for e in candidates
                       if (j, e) not in keep and (j, e) != selected[i][:2]]
             if screen is not None and len(others) > screen:
@@ -778,8 +789,25 @@ def diagnose(
                     continue
                 gain = n_res * np.log(_rss_q(trial.q_fit, srch.q, sigma_s) / _rss_q(current.q_fit, srch.q, sigma_s)) \
                     + (_n_params(names) - k_old) * np.log(n_res)
-                if gain < DELTA_BIC and (swap is None or gain < swap[0]):
-                    swap = (gain, joint, effect, trial)
+                if gain < DELTA_BIC:
+                    swaps.append((gain, joint, effect, trial))
+            swaps.sort(key=lambda x: x[0])
+            if selected[i][:2] in gated_in and swaps:
+                # An effect accepted for its prediction of another recording is replaced only by
+                # one whose set predicts that recording at least as well (the fit span's ΔBIC
+                # cannot tell polishing from physics here: that is why it was judged so).
+                name, span = judge_span()
+                base = prediction_rms_sigma(_model_of(model, current), span)
+                for sw in swaps:
+                    new = prediction_rms_sigma(_model_of(model, sw[3]), span)
+                    tested.append({"prediction_gate": f"{sw[2]} on {sw[1]} in place of {selected[i][1]} on {selected[i][0]}",
+                                   "span": name, "prediction_rms_sigma": [base, new], "passed": new <= base})
+                    if new <= base:
+                        swap = sw
+                        gated_in.add((sw[1], sw[2]))
+                        break
+            elif swaps:
+                swap = swaps[0]
             if swap is not None:
                 gain, joint, effect, trial = swap
                 tested.append({"swap": f"{selected[i][1]} on {selected[i][0]} -> {effect} on {joint}", "delta_bic": float(gain)})
