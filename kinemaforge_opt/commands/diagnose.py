@@ -59,6 +59,8 @@ def register(sub) -> None:
     p.add_argument("--no-drift", action="store_true", help="skip the Drake drift comparison")
     p.add_argument("--segment", type=float, default=None, metavar="S",
                    help="fit and predict in segments of S seconds (long oscillating recordings)")
+    p.add_argument("--max-effects", type=int, default=None, metavar="N",
+                   help="stop the selection after N effects (default: physics.diagnose.MAX_EFFECTS)")
     p.add_argument("--other", nargs="*", default=(), metavar="CSV",
                    help="further recordings of the same system: compared before/after; under model-form error "
                         "the first one with signal also judges acceptance (see below)")
@@ -67,6 +69,12 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from tqdm import tqdm
+
+    from ..errors import InputFileError
+    from ..physics.diagnose import MAX_EFFECTS
+
+    if args.max_effects is not None and args.max_effects < 1:
+        raise InputFileError(f"--max-effects must be at least 1, got {args.max_effects}")
 
     from ..io.recording import read_recording
     from ..physics.diagnose import diagnose
@@ -91,7 +99,7 @@ def run(args) -> int:
     for other in others:
         match_recording(model, other)
     d = diagnose(model, rec, holdout_fraction=args.holdout, progress=progress, segment_s=args.segment,
-                 other_recordings=others)
+                 other_recordings=others, max_effects=args.max_effects or MAX_EFFECTS)
     bar.close()
     if reconstructed:
         import dataclasses

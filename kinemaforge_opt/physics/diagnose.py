@@ -95,6 +95,11 @@ SEARCH_RATE_HZ = 30.0
 # evidence: the NLP fit and its ΔBIC still decide).
 SCREEN = 5
 
+# Selection stops after this many effects (a bound on the search's cost, not a prior on the
+# system: on the real Qube the fifth, arm Coulomb friction, is the one its recordings need; with 4
+# it was never tested).
+MAX_EFFECTS = 6
+
 # Per selection round, at most this many hypotheses below the model-form floor (strongest ΔBIC
 # first) are judged by their prediction of another recording (``prediction_gate`` in ``diagnose``).
 PREDICTION_TRIES = 3
@@ -510,7 +515,7 @@ def diagnose(
     recording: Recording,
     holdout_fraction: float = 0.25,
     candidates: tuple[str, ...] = CANDIDATES,
-    max_effects: int = 4,
+    max_effects: int = MAX_EFFECTS,
     progress=None,
     segment_s: float | None = None,
     other_recordings: tuple[Recording, ...] = (),

@@ -59,3 +59,18 @@ def test_summary_lists_effects_a_check_dropped_beside_those_kept():
     assert "dropped axis tilt on j0: its 95% interval holding the off value" in text
     assert "(no span outside the fit can show an effect)" in text
     assert d.other_used_for_selection is None
+
+
+def test_cli_rejects_a_max_effects_below_one(tmp_path, capsys):
+    from pathlib import Path
+
+    from kinemaforge_opt.cli import main as cli_main
+    from kinemaforge_opt.io.recording import Recording, write_recording
+
+    t = np.linspace(0.0, 2.0, 61)
+    csv = tmp_path / "rec.csv"
+    write_recording(csv, Recording(t, ("theta", "alpha"), np.stack([0.1 * np.sin(t), 0.2 * np.cos(5 * t)], axis=1)))
+    urdf = Path(__file__).resolve().parents[2] / "models" / "furuta" / "furuta.urdf"
+    code = cli_main(["diagnose", str(urdf), str(csv), "-o", str(tmp_path / "out"), "--max-effects", "0"])
+    assert code == 2
+    assert "--max-effects must be at least 1, got 0" in capsys.readouterr().err
