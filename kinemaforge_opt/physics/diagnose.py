@@ -221,7 +221,10 @@ class Diagnosis:
             lines.append(f"other recording {k + 1}: prediction RMS before {h.rms_before:.4g}, after {h.rms_after:.4g}{note}")
         if self.held_out is not None:
             lines.append(f"held-out prediction RMS: before {self.held_out.rms_before:.4g}, after "
-                         f"{self.held_out.rms_after:.4g} (×{self.held_out.rms_before / max(self.held_out.rms_after, 1e-12):.1f} better)")
+                         f"{self.held_out.rms_after:.4g} (×{self.held_out.rms_before / max(self.held_out.rms_after, 1e-12):.1f} better)"
+                         + ("" if (x := check.get("signal_sigma", {}).get("held_out")) is None or x >= THRESHOLD_SIGMA
+                            else f"; the nominal model errs there by only {x:.1f} noise sigmas: the span shows no "
+                                 "effect, this figure says nothing"))
         for key in ("gate_reason", "reason"):
             if check.get(key):
                 lines.append(f"({check[key]})")

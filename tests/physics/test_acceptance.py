@@ -74,3 +74,11 @@ def test_cli_rejects_a_max_effects_below_one(tmp_path, capsys):
     code = cli_main(["diagnose", str(urdf), str(csv), "-o", str(tmp_path / "out"), "--max-effects", "0"])
     assert code == 2
     assert "--max-effects must be at least 1, got 0" in capsys.readouterr().err
+
+
+def test_summary_says_a_held_out_span_without_signal_says_nothing():
+    h = _held([0.001, 0.001])
+    d = Diagnosis((), (), (), None, None, None, h, (), acceptance_check={
+        "span": "other_recording_1", "reason": "judged on other recording 1",
+        "signal_sigma": {"held_out": 1.7, "other_recording_1": 41.0}})
+    assert "errs there by only 1.7 noise sigmas" in d.summary()
