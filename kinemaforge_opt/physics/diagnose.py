@@ -250,6 +250,17 @@ def prediction_signal(h: HeldOut, sigma_q: np.ndarray) -> float:
     return float(np.max(np.sqrt(np.mean((h.q_before - h.q_rec) ** 2, axis=0)) / np.maximum(sigma_q, 1e-12)))
 
 
+def quantisation_sigma(q: np.ndarray) -> np.ndarray:
+    """Per joint (n,), the standard deviation of the rounding error of a quantised sensor [rad or
+    m]: its step (the smallest non-zero change between samples of ``q`` (T, n)) / sqrt(12); about
+    0 for an unquantised one.  The high-frequency noise estimate of a quantised encoder that
+    mostly stands still can fall below it."""
+    d = np.abs(np.diff(q, axis=0))
+    d = np.where(d > 1e-12, d, np.inf)
+    step = d.min(axis=0) if d.size else np.full(q.shape[1], np.inf)
+    return np.where(np.isfinite(step), step, 0.0) / np.sqrt(12.0)
+
+
 def search_decimation(rec: Recording) -> int:
     """Samples per block of the search grid: the largest k whose block means are still sampled
     at SEARCH_RATE_HZ or more (1 for a recording at or below it)."""
@@ -549,6 +560,8 @@ def diagnose(
     fit_rec = rec.window(rec.t[0], rec.t[split - 1])
     held = rec.window(rec.t[split], rec.t[-1]) if split < rec.t.size - 3 else None
     sigma_q = noise_std(fit_rec.q)
+    # whether a span shows signal is judged against at least the sensor's rounding error
+    sigma_signal = np.maximum(sigma_q, quantisation_sigma(rec.q))
     # The hypothesis search runs on a coarser copy of the fit span (effects are low-bandwidth):
     # block means at SEARCH_RATE_HZ or more, with their own noise level; only the nominal and
     # the final model are fitted at the full rate.
@@ -645,8 +658,8 @@ def diagnose(
                 span = match_recording(model, o)
                 say(f"checking whether other recording {k + 1} can judge effects below the model-form floor")
                 h = predict_before_after(nominal_model, nominal_model, span, segment_s)
-                judge.setdefault("signal_sigma", {})[f"other_recording_{k + 1}"] = prediction_signal(h, sigma_q)
-                if prediction_signal(h, sigma_q) >= THRESHOLD_SIGMA:
+                judge.setdefault("signal_sigma", {})[f"other_recording_{k + 1}"] = prediction_signal(h, sigma_signal)
+                if prediction_signal(h, sigma_signal) >= THRESHOLD_SIGMA:
                     judge["span"] = (f"other_recording_{k + 1}", span)
                     break
         return judge["span"]
@@ -894,7 +907,7 @@ def diagnose(
         for name, span in spans:
             say(f"checking whether the {_span_words(name)} can judge the effects")
             h = predict_before_after(nominal_model, _model_of(model, current), span, segment_s)
-            signal[name] = prediction_signal(h, sigma_q)
+            signal[name] = prediction_signal(h, sigma_signal)
             if signal[name] < THRESHOLD_SIGMA:
                 continue
             judged_by_held_out = name == "held_out"

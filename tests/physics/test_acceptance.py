@@ -82,3 +82,15 @@ def test_summary_says_a_held_out_span_without_signal_says_nothing():
         "span": "other_recording_1", "reason": "judged on other recording 1",
         "signal_sigma": {"held_out": 1.7, "other_recording_1": 41.0}})
     assert "errs there by only 1.7 noise sigmas" in d.summary()
+
+
+def test_quantisation_sigma_is_the_encoder_step_over_root_twelve():
+    from kinemaforge_opt.physics.diagnose import quantisation_sigma
+
+    step = 2 * np.pi / 2048
+    t = np.linspace(0, 3, 300)
+    q = np.stack([np.round(0.3 * np.sin(t) / step) * step, 0.3 * np.sin(t)], axis=1)
+    q[:100, 0] = q[100, 0]  # standing still for a while: no change, not a step
+    s = quantisation_sigma(q)
+    assert s[0] == pytest.approx(step / np.sqrt(12), rel=1e-6)
+    assert s[1] < 1e-3 * step  # an unquantised signal has no rounding floor
