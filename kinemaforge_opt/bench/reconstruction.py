@@ -410,10 +410,16 @@ class _Runs:
     further new runs are not made: they return a record with ``skipped`` set, which the tables
     leave out and list."""
 
-    def __init__(self, out_dir: Path, cache: Path, say, budget_s: float | None = None):
+    def __init__(self, out_dir: Path, cache: Path, say, budget_s: float | None = None, resume: bool = False):
         self.out, self.cache, self.say, self.memo = out_dir, cache, say, {}
         self.generation_s = 0.0
         self.budget_s, self.t0 = budget_s, time.perf_counter()
+        if resume:  # the finished runs of an interrupted run into the same folder (same code: the caller's word)
+            path = out_dir / "records.jsonl"
+            lines = path.read_text(encoding="utf-8").splitlines() if path.is_file() else []
+            for r in map(json.loads, filter(None, lines)):
+                self.memo[(r["case"], json.dumps(r["options"], sort_keys=True))] = r
+            say(f"resuming: {len(self.memo)} finished runs from {path}")
 
     def __call__(self, case, options: dict | None = None) -> dict:
         options = dict(options or {})
@@ -480,12 +486,16 @@ def _stage_times(records: list[dict], key: str) -> dict:
     return out
 
 
-def run_reconstruction(size: RecoSize, out_dir: str | Path, cache: Path | None = None, progress=None) -> dict:
+def run_reconstruction(size: RecoSize, out_dir: str | Path, cache: Path | None = None, progress=None,
+                       resume: bool = False) -> dict:
     """Run the reconstruction benchmark at ``size``; reconstructions go under
     ``out_dir/reconstruction``, generated cases under ``cache`` (default :func:`cache_root`).
+    resume: reuse the runs already in ``out_dir/reconstruction/records.jsonl`` (an interrupted
+    run of the same code) instead of making them again.
     Returns the "reconstruction" part of the bench document (see :mod:`.report`)."""
     t_start = time.perf_counter()
-    runs = _Runs(Path(out_dir) / "reconstruction", cache or cache_root(), progress or (lambda s: None), size.budget_s)
+    runs = _Runs(Path(out_dir) / "reconstruction", cache or cache_root(), progress or (lambda s: None), size.budget_s,
+                 resume)
     result = tabulate(size, runs)
     return {**result, "records": list(runs.memo.values()), "generation_s": runs.generation_s,
             "total_s": time.perf_counter() - t_start}

@@ -65,11 +65,12 @@ def revision() -> str | None:
 
 
 def run_bench(size: Size, cases: list[str] | None = None, progress=None, out_dir=None,
-              parts: tuple[str, ...] = PARTS, cache=None) -> dict:
+              parts: tuple[str, ...] = PARTS, cache=None, resume: bool = False) -> dict:
     """Run the chosen ``parts`` of the benchmark (all by default); returns the result document
     (see :mod:`.report`).  ``out_dir``: where the reconstruction part keeps its reconstructions
     (a temporary folder when None); ``cache``: its generated cases (default
-    :func:`.reconstruction.cache_root`)."""
+    :func:`.reconstruction.cache_root`); ``resume``: reuse the reconstruction runs an
+    interrupted run left in ``out_dir`` (see :func:`.reconstruction.run_reconstruction`)."""
     import tempfile
 
     say = progress or (lambda s: None)
@@ -108,7 +109,8 @@ def run_bench(size: Size, cases: list[str] | None = None, progress=None, out_dir
         stage["robot arm side-by-side end to end"] = arm["total_s"]
     if "reconstruction" in parts:
         with tempfile.TemporaryDirectory() as tmp:
-            reco = result["reconstruction"] = run_reconstruction(size.reco, out_dir or tmp, cache, say)
+            reco = result["reconstruction"] = run_reconstruction(size.reco, out_dir or tmp, cache, say,
+                                                                 resume=resume and out_dir is not None)
         t1 = [r for r in reco["records"] if r["ok"] and r["options"] == {}]
         for k in dict.fromkeys(k for r in t1 for k in r["timing_s"]):
             stage[f"reconstruct: {k} per case ({size.reco.views} views, {size.reco.frames} steps)"] = float(

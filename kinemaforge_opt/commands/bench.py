@@ -40,6 +40,9 @@ def register(sub) -> None:
     p.add_argument("--cases", nargs="+", metavar="CASE", help="only these discovery cases (default: all)")
     p.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS), metavar="PART",
                    help=f"only these parts of the benchmark: {', '.join(PARTS)} (default: all)")
+    p.add_argument("--resume", action="store_true",
+                   help="reuse the reconstruction runs an interrupted run of the same code left in "
+                        "OUT/reconstruction/records.jsonl instead of making them again")
     p.set_defaults(func=run)
 
 
@@ -60,7 +63,8 @@ def run(args) -> int:
         bar.set_postfix_str(msg)
         bar.update(1)
 
-    result = run_bench(QUICK if args.quick else FULL, args.cases, progress, out_dir=args.out, parts=tuple(args.parts))
+    result = run_bench(QUICK if args.quick else FULL, args.cases, progress, out_dir=args.out, parts=tuple(args.parts),
+                       resume=args.resume)
     bar.close()
     paths = write_report(result, args.out)
     print(paths["markdown"].read_text())

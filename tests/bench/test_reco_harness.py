@@ -206,3 +206,22 @@ def test_tables_and_plots(tmp_path):
     for k in ("drift_horizon", "sensitivity", "stage_scaling"):
         assert paths[k].stat().st_size > 0
     assert "Table 1 — reconstruction per category" in paths["markdown"].read_text()
+
+
+def test_resume_reuses_the_runs_an_interrupted_run_left_and_makes_the_others(tmp_path):
+    import json
+    from types import SimpleNamespace
+
+    from kinemaforge_opt.bench.reconstruction import _Runs
+
+    out = tmp_path / "reconstruction"
+    out.mkdir()
+    done = {"case": "protocol_cabinet_0", "options": {"nlp": False}, "ok": True, "axis_error_deg": 0.5}
+    (out / "records.jsonl").write_text(json.dumps(done) + "\n")
+    said = []
+    runs = _Runs(out, tmp_path / "cache", said.append, resume=True)
+    case = SimpleNamespace(name="protocol_cabinet_0", category="cabinet", views=4, frames=12)
+    assert runs(case, {"nlp": False}) == done
+    assert "1 finished runs" in said[0]
+    fresh = _Runs(out, tmp_path / "cache", said.append, budget_s=0.0)  # without resume: made again
+    assert fresh(case, {"nlp": False})["skipped"]
