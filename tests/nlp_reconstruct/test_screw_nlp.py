@@ -37,16 +37,23 @@ def _errors(model, axis=AXIS, origin=ORIGIN):
     return np.degrees(axis_angle_error(j.axis, axis)), line_distance(j.axis, j.T_parent_joint[:3, 3], axis, origin)
 
 
-@pytest.fixture(scope="module")
-def pushed():
-    """A damped door (b = 0.5 N·m·s/rad, 3 kg) pushed 1 N at its edge for 0.5 s, 1.5 s, frames at 10 Hz."""
+def pushed_door(sim_hz: float, every: int):
+    """A damped door (b = 0.5 N·m·s/rad, 3 kg) pushed 1 N at its edge for 0.5 s of 1.5 s, simulated
+    at ``sim_hz`` with every ``every``-th sample a frame (q noise 0.02 rad), the closed form off by
+    TILT and ~1 cm.  Returns (true model, ScrewData, true q at the frames (F,))."""
     true = door_model(AXIS, ORIGIN, damping=0.5)
     init = door_model(TILT @ AXIS, ORIGIN + [0.01, -0.008, 0.0])
-    t, q, _, w = pushed_trajectory(true, 1.5, 120, 0.5, 1.0)
-    idx = np.arange(0, t.size, 12)
+    t, q, _, w = pushed_trajectory(true, 1.5, sim_hz, 0.5, 1.0)
+    idx = np.arange(0, t.size, every)
     rng = np.random.default_rng(1)
     data = exact_data(true, init, t[idx], q[idx], q[idx] + rng.normal(0, 0.02, idx.size), wrenches=w)
     return true, data, q[idx]
+
+
+@pytest.fixture(scope="module")
+def pushed():
+    """The pushed door simulated at 120 Hz, frames at 10 Hz."""
+    return pushed_door(120, 12)
 
 
 def test_residual_linearisation_matches_the_direct_point_to_plane_residual():

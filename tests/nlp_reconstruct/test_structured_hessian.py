@@ -10,18 +10,13 @@ import pytest
 from kinemaforge_opt.errors import KinemaforgeError
 from kinemaforge_opt.nlp.reconstruction import ScrewOptions, build_screw_problem, correspondences, initial_state
 
-from .test_screw_nlp import AXIS, ORIGIN, TILT
-from .worlds import door_model, exact_data, pushed_trajectory
+from .test_screw_nlp import pushed_door
 
 
 @pytest.fixture(scope="module")
 def data():
-    true = door_model(AXIS, ORIGIN, damping=0.5)
-    init = door_model(TILT @ AXIS, ORIGIN + [0.01, -0.008, 0.0])
-    t, q, _, w = pushed_trajectory(true, 1.5, 60, 0.5, 1.0)
-    idx = np.arange(0, t.size, 6)
-    return exact_data(true, init, t[idx], q[idx], q[idx] + np.random.default_rng(1).normal(0, 0.02, idx.size),
-                      wrenches=w)
+    """The pushed door simulated at 60 Hz, frames at 10 Hz."""
+    return pushed_door(60, 6)[1]
 
 
 @pytest.mark.parametrize("energy,impact", [("soft", False), ("hard", False), ("off", False), ("soft", True), ("hard", True)])
