@@ -29,8 +29,6 @@ EXPAND = True
 # 1 s.  Converging fits need 5-40 iterations of about one evaluation each on long recordings; a
 # fit that spends more is in a restoration phase or ill-conditioned (a Stribeck speed near zero).
 CPU_CAP_EVALUATIONS = 100
-# Extra IPOPT options of every hypothesis solve (``"ipopt.<name>": value``).
-IPOPT_OPTIONS: dict = {}
 
 
 def effect_parameters(model: ArticulatedModel, joint: str, effect: str) -> list[str]:
@@ -241,7 +239,7 @@ class _StructuredNLP:
         self.max_cpu_s = max(1.0, min(max_iter, CPU_CAP_EVALUATIONS) * t_eval) if max_cpu_s is None else float(max_cpu_s)
         opts = {"ipopt.max_iter": max_iter, "ipopt.tol": tol, "ipopt.print_level": print_level, "print_time": False,
                 "ipopt.sb": "yes", "jac_g": jac_fn, "hess_lag": hess_fn,
-                "ipopt.max_cpu_time": self.max_cpu_s, **IPOPT_OPTIONS}
+                "ipopt.max_cpu_time": self.max_cpu_s}
         self.solver = ca.nlpsol("hypotheses", "ipopt", {"x": w, "f": f, "g": g}, opts)
         self.fit = fit
 
