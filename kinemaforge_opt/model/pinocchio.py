@@ -64,3 +64,11 @@ def build_pin_model(model: ArticulatedModel, check_dynamics: bool = True) -> pin
         Y = pin.Inertia(link.inertial.mass, np.asarray(link.inertial.com), np.asarray(link.inertial.inertia))
         pm.appendBodyToJoint(jid, Y, T_joint_link)
     return pm
+
+
+def inverse_dynamics(model: ArticulatedModel, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Rigid-body inverse dynamics M(q) a + h(q, v) (Pinocchio's RNEA) along the states ``q``,
+    ``v``, ``a`` (T, n) -> (T, n) [N·m or N]; joint friction, damping and springs are not in it."""
+    pm = build_pin_model(model)
+    data = pm.createData()
+    return np.array([pin.rnea(pm, data, qq, vv, aa) for qq, vv, aa in zip(q, v, a)])

@@ -51,6 +51,7 @@ from ..calibration import Calibration
 from ..errors import DataError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
+from ..model.pinocchio import build_pin_model, inverse_dynamics
 from ..nlp.joint_space import build_joint_space_fit, friction_smoothing, match_recording, noise_std, velocity_estimate
 from .effects import EFFECTS
 from .locate import THRESHOLD_SIGMA, JointMismatch, inverse_dynamics_residual, locate
@@ -364,17 +365,6 @@ def linear_init(model: ArticulatedModel, joint: str, effect: str, start: Trial, 
     return out
 
 
-def _id_force(model: ArticulatedModel, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """Rigid-body inverse dynamics M(q) a + h(q, v) of ``model`` (T, n) [N·m or N]."""
-    import pinocchio as pin
-
-    from ..model.pinocchio import build_pin_model
-
-    pm = build_pin_model(model)
-    pd = pm.createData()
-    return np.array([pin.rnea(pm, pd, qq, vv, aa) for qq, vv, aa in zip(q, v, a)])
-
-
 def _columns(model: ArticulatedModel, joint: str, effect: str, q: np.ndarray, v: np.ndarray, id_force: np.ndarray,
              eps: np.ndarray, v_scale: np.ndarray, stops: dict, vs: float | None = None) -> list[np.ndarray]:
     """Force columns (each (T,)) of ``effect`` on ``joint`` for the linear pre-screen: the effect's
@@ -596,7 +586,7 @@ def diagnose(
     # the missing generalised force, on the search grid (block means: full-rate accelerations are
     # mostly differentiated noise, which the inertia column of the pre-screen then "explains")
     r_nom, q_s, v_s, a_s = inverse_dynamics_residual(model, srch)
-    id_force = _id_force(model, q_s, v_s, a_s)
+    id_force = inverse_dynamics(model, q_s, v_s, a_s)
 
     def trial_of(selected_: list[tuple[str, str]], start: Trial) -> Trial:
         names = [n for j, e in selected_ for n in _free_for(model, j, e)]
@@ -1060,7 +1050,6 @@ def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec:
 
 
 def _axis_world(model: ArticulatedModel, joint: str) -> np.ndarray:
-    from ..model.pinocchio import build_pin_model
     import pinocchio as pin
 
     pm = build_pin_model(model)
@@ -1086,7 +1075,6 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
     from scipy.integrate import solve_ivp
     from scipy.optimize import least_squares
 
-    from ..model.pinocchio import build_pin_model
     from .locate import smooth_derivatives
 
     pm = build_pin_model(model)

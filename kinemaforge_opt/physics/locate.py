@@ -16,7 +16,7 @@ from scipy.signal import savgol_filter
 
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
-from ..model.pinocchio import build_pin_model
+from ..model.pinocchio import inverse_dynamics
 
 THRESHOLD_SIGMA = 3.0  # a window is flagged when its running RMS exceeds this many noise sigmas
 
@@ -52,15 +52,10 @@ def smooth_derivatives(rec: Recording, window_s: float | None = None) -> tuple[n
 
 def inverse_dynamics_residual(model: ArticulatedModel, rec: Recording) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(residual force (T, n) [N·m or N], q, v, a) of ``model`` along ``rec``."""
-    import pinocchio as pin
-
-    pm = build_pin_model(model)
-    pd = pm.createData()
     q, v, a = smooth_derivatives(rec)
     tau = rec.tau if rec.tau is not None else np.zeros_like(q)
     passive = np.stack([j.dynamics.passive_force(q[:, k], v[:, k]) for k, j in enumerate(model.movable_joints)], axis=1)
-    rnea = np.array([pin.rnea(pm, pd, qq, vv, aa) for qq, vv, aa in zip(q, v, a)])
-    return rnea - tau - passive, q, v, a
+    return inverse_dynamics(model, q, v, a) - tau - passive, q, v, a
 
 
 def _windows(t: np.ndarray, flagged: np.ndarray, min_gap_s: float) -> tuple[tuple[float, float], ...]:
