@@ -198,13 +198,15 @@ def _true_lines(true_model, q: np.ndarray) -> dict[str, tuple[np.ndarray, np.nda
 
 def _dynamics_words(joint: dict) -> str:
     """The joint's fitted damping and Coulomb friction with the NLP's verdict on each, e.g.
-    "damping 0.61 N·m·s/rad (identified), Coulomb 0.23 N·m (not_identified)"."""
-    unit = {"revolute": ("N·m·s/rad", "N·m"), "prismatic": ("N·s/m", "N")}.get(joint["type"], ("", ""))
+    "damping 0.61 N·m·s/rad (identified), Coulomb 0.23 N·m (not identified)"."""
+    units = {"revolute": ("N·m·s/rad", "N·m"), "prismatic": ("N·s/m", "N")}
+    damping_unit, coulomb_unit = units.get(joint["type"], ("", ""))
     status = joint.get("identifiability", {})
     words = []
-    for (key, label), u in zip((("damping", "damping"), ("coulomb", "Coulomb")), unit):
+    for key, label, unit in (("damping", "damping", damping_unit), ("coulomb", "Coulomb", coulomb_unit)):
         verdict = status.get(f"{key}:{joint['name']}", {}).get("status")
-        words.append(f"{label} {joint['dynamics'][key]:.3g} {u}" + (f" ({verdict.replace('_', ' ')})" if verdict else ""))
+        words.append(f"{label} {joint['dynamics'][key]:.3g} {unit}"
+                     + (f" ({verdict.replace('_', ' ')})" if verdict else ""))
     return ", ".join(words)
 
 

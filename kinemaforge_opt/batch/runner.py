@@ -1,7 +1,8 @@
 """Run a job over many inputs on Ray (a local cluster by default, or an existing one at
 ``address``).  Each input's outcome goes to ``OUT/<name>/status.json``: ``{"status": "ok" |
 "error", "time_s", "started_unix_s", "finished_unix_s", "result" | "error"}``; an input whose
-status is "ok" is skipped on a re-run (failed ones are retried).  A failing input never stops the others."""
+status is "ok" is skipped on a re-run (failed ones are retried).  A failing input never stops
+the others."""
 
 from __future__ import annotations
 
