@@ -569,14 +569,10 @@ def diagnose(
     def fit_for(effects_: list[tuple[str, str]]) -> HypothesisFit:
         if not any(e == "axis_tilt" for _, e in effects_):
             return search["base"]
-        if "axis" not in search:  # the symbolic axis makes every evaluation ~10x dearer: build on demand
+        if "axis" not in search:  # the symbolic axis makes the fit's build dearer: build on demand
             search["axis"] = HypothesisFit(model, srch, hyps + [(j, "axis_tilt") for j in model.joint_names
                                                                    if "axis_tilt" in candidates],
-                                           segment_s, stops, CANDIDATE_MAX_ITER, sigma_s, eps,
-                                           # the same CPU budget per hypothesis as without a free axis
-                                           # (each evaluation costs ~5x more; tilts that the data
-                                           # show converge in < 20 iterations)
-                                           max_cpu_s=search["base"].nlp.max_cpu_s)
+                                           segment_s, stops, CANDIDATE_MAX_ITER, sigma_s, eps)
         return search["axis"]
 
     nominal_trial = search["base"].solve([])

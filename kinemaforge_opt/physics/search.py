@@ -1,13 +1,16 @@
-"""One NLP for every hypothesis of a recording.
+"""One collocation fit for every hypothesis of a recording.
 
 Forward selection tests many hypotheses (nominal model + a set of effects) on the same
-recording.  Building a CasADi/IPOPT solver (symbolic derivatives, sparsity) costs as much as
-solving it, so :class:`HypothesisFit` builds the joint-space collocation fit once with the
-parameters of *every* candidate effect present, and tests a hypothesis by fixing the parameters
-of the effects it leaves out at their nominal values (equal bounds: IPOPT removes fixed
-variables, ``fixed_variable_treatment=make_parameter``).  At its nominal value every effect
-parameter switches its effect off (zero coefficient, unit inertia ratio, nominal axis), so a
-fixed-out effect is exactly absent.  Each solve is warm-started from the parent hypothesis.
+recording.  :class:`HypothesisFit` builds the joint-space collocation fit once with the
+parameters of *every* candidate effect present; a hypothesis is tested by an IPOPT problem in
+which the parameters of the effects it leaves out are numeric constants at their nominal values.
+At its nominal value every effect parameter switches its effect off (zero coefficient, unit
+inertia ratio, nominal axis), so a fixed-out effect is exactly absent, and CasADi's constant
+folding removes its terms from the per-interval derivatives: a hypothesis with one or two free
+effects evaluates its Hessian in a tenth of the instructions of one with every parameter
+symbolic (and a fixed axis costs nothing).  One problem is built per distinct set of free
+parameters, on first use, and reused by every later solve of that set (a few milliseconds to
+build; a set recurs across rounds and starts).
 
 The fit uses no energy term (``energy="off"``): the collocation defects already impose the
 dynamics, and the windowed energy penalty couples every sample of a window in the Hessian.
@@ -24,7 +27,6 @@ from ..model.articulated import ArticulatedModel
 from ..nlp.joint_space import build_joint_space_fit
 from .effects import EFFECTS
 
-EXPAND = True
 # CPU budget of one hypothesis solve: this many derivative evaluations (timed at build), at least
 # 1 s.  Converging fits need 5-40 iterations of about one evaluation each on long recordings; a
 # fit that spends more is in a restoration phase or ill-conditioned (a Stribeck speed near zero).
@@ -68,11 +70,13 @@ class _StructuredNLP:
     with the number of samples, and each evaluation is one vectorised call.
 
     Decision vector w = (vec(X), z): X (2n, G) collocation states column-major, z the scaled
-    parameters of every block in ``fit.blocks`` order.  Constraints: the kept Hermite–Simpson
-    defects (interval order), then |axis|² - 1 per free-axis block.  Objective: the noise-
-    normalised squared output error at the samples, averaged over samples (as ``output_q``)."""
+    parameters of the blocks named in ``free`` in ``fit.blocks`` order; every other block is a
+    constant at its nominal value.  Constraints: the kept Hermite–Simpson defects (interval
+    order), then |axis|² - 1 per free-axis block.  Objective: the noise-normalised squared output
+    error at the samples, averaged over samples (as ``output_q``)."""
 
-    def __init__(self, fit, max_iter: int, tol: float = 1e-6, print_level: int = 0, max_cpu_s: float | None = None):
+    def __init__(self, fit, free: tuple[str, ...], max_iter: int, tol: float = 1e-6, print_level: int = 0,
+                 max_cpu_s: float | None = None):
         import casadi as ca
 
         rec = fit.recording
@@ -83,9 +87,10 @@ class _StructuredNLP:
         G = t_grid.size
         T = rec.t.size
         self.n, self.nx, self.G, self.m = n, nx, G, m
-        self.blocks = fit.blocks
+        free_blocks = [b for b in fit.blocks if b.name in free]
+        self.blocks = tuple(free_blocks)
         offs, o = {}, 0
-        for b in fit.blocks:
+        for b in free_blocks:
             offs[b.name] = o
             o += b.size
         nz = o
@@ -93,23 +98,27 @@ class _StructuredNLP:
         self.nz = nz
         nw = nx * G + nz
 
-        # theta and phi as (linear) functions of z
+        # theta and phi as (linear) functions of z; a fixed block is its nominal value (a
+        # constant, folded away where it switches an effect off)
         zs = ca.SX.sym("z", nz)
         byname = {b.name: b for b in fit.blocks}
+
+        def physical(name: str):
+            b = byname[name]
+            return zs[offs[name]: offs[name] + b.size] * b.scale if name in offs else ca.SX(ca.DM(b.nominal))
+
         theta_parts = []
         for name in fit.theta_names:
             if name in byname:
-                b = byname[name]
-                theta_parts.append(zs[offs[name]: offs[name] + b.size] * b.scale)
-            else:
-                r = name + "_ratio"
-                theta_parts.append(zs[offs[r]] * fit.dynamics.parameter(name).nominal)
+                theta_parts.append(physical(name))
+            else:  # tied to an inertia ratio
+                theta_parts.append(physical(name + "_ratio")[0] * fit.dynamics.parameter(name).nominal)
         theta = ca.vertcat(*theta_parts) if theta_parts else ca.SX(0, 1)
         phi_parts = []
         for i in range(len(fit.phi_layout)):
             if i in fit.phi_free:
                 name, k = fit.phi_free[i]
-                phi_parts.append(zs[offs[name] + k] * byname[name].scale[k])
+                phi_parts.append(physical(name)[k])
             else:
                 phi_parts.append(ca.SX(fit.phi_fixed[i]))
         phi = ca.vertcat(*phi_parts) if phi_parts else ca.SX(0, 1)
@@ -141,7 +150,7 @@ class _StructuredNLP:
         Xa, Xb = X[:, kept.tolist()], X[:, (kept + 1).tolist()]
         Ua, Ub, Hh = U[:, kept], U[:, kept + 1], Hs[kept][None, :]
         D = f_d.map(K)(Xa, Xb, Ua, Ub, Hh, z)
-        axis_blocks = [b for b in fit.blocks if b.name.endswith(".axis")]
+        axis_blocks = [b for b in free_blocks if b.name.endswith(".axis")]
         g_parts = [ca.vec(D)]
         for b in axis_blocks:
             za = z[offs[b.name]: offs[b.name] + 3]
@@ -247,12 +256,13 @@ class _StructuredNLP:
 class HypothesisFit:
     """The shared fit of ``recording`` for the (joint, effect) pairs in ``hypotheses``.
 
-    Build once (``__init__``), then :meth:`solve` any subset of their parameters.
+    Build once (``__init__``), then :meth:`solve` any subset of their parameters (the IPOPT
+    problem of a subset is built on its first solve: :meth:`nlp_for`).
     limit_stops: per joint (side, initial stop) for ``limit_contact``, sigma_q (n,) the encoder
     noise and friction_eps (n,) the smooth-sign width [rad/s or m/s] (defaults: from the
     recording; see :func:`kinemaforge_opt.nlp.joint_space.build_joint_space_fit`).  max_cpu_s: IPOPT
-    CPU-time cap of a solve [s] (default: ``max_iter`` evaluations of the derivatives, timed at
-    build, at least 1 s).
+    CPU-time cap of a solve [s] (default: per subset, ``CPU_CAP_EVALUATIONS`` evaluations of its
+    derivatives, timed at its build, at least 1 s).
     """
 
     def __init__(self, model: ArticulatedModel, recording: Recording, hypotheses: list[tuple[str, str]],
@@ -269,7 +279,8 @@ class HypothesisFit:
         self.fit = build_joint_space_fit(model, recording, self.names, energy="off", segment_s=segment_s,
                                          limit_stops=limit_stops, sigma_q=sigma_q, friction_eps=friction_eps)
         self.blocks = {b.name: b for b in self.fit.blocks}
-        self.nlp = _StructuredNLP(self.fit, max_iter, max_cpu_s=max_cpu_s)
+        self.max_iter, self.max_cpu_s = max_iter, max_cpu_s
+        self._nlps: dict[tuple[str, ...], _StructuredNLP] = {}
         self.recording = self.fit.recording
         rec = self.recording
         n = model.nq
@@ -291,6 +302,14 @@ class HypothesisFit:
         v = np.array([np.interp(self.t_grid, t_src, c) for c in X_src[n:]])
         return np.vstack([q, v])
 
+    def nlp_for(self, free: list[str] | tuple[str, ...]) -> _StructuredNLP:
+        """The IPOPT problem with the blocks ``free`` as variables (every other block fixed at its
+        nominal value), built on first use."""
+        key = tuple(n for n in self.blocks if n in free)
+        if key not in self._nlps:
+            self._nlps[key] = _StructuredNLP(self.fit, key, self.max_iter, max_cpu_s=self.max_cpu_s)
+        return self._nlps[key]
+
     def nominal_z(self, name: str) -> np.ndarray:
         b = self.blocks[name]
         return b.nominal / b.scale
@@ -311,7 +330,7 @@ class HypothesisFit:
             raise KeyError(f"parameters {unknown} are not in the shared fit; it holds {list(self.blocks)}")
         import time
 
-        nlp = self.nlp
+        nlp = self.nlp_for(free)
         nxG = nlp.nx * nlp.G
         X0 = start.X if start is not None and not states_from_data else self.x_init
         if x0 is not None:
@@ -320,20 +339,16 @@ class HypothesisFit:
         lbw = np.concatenate([np.full(nxG, -np.inf), np.zeros(nlp.nz)])
         ubw = np.concatenate([np.full(nxG, np.inf), np.zeros(nlp.nz)])
         lbg, ubg = np.zeros(nlp.ng), np.zeros(nlp.ng)
-        for name, b in self.blocks.items():
+        for b in nlp.blocks:
+            name = b.name
             sl = slice(nxG + nlp.z_offsets[name], nxG + nlp.z_offsets[name] + b.size)
-            if name in free:
-                z0 = start.z[name] if start is not None and name in start.free else self.nominal_z(name)
-                if init and name in init:
-                    z0 = np.asarray(init[name], float) / b.scale
-                w0[sl] = z0
-                lo, hi = (bounds or {}).get(name, (b.lower, b.upper))
-                lbw[sl], ubw[sl] = np.asarray(lo, float) / b.scale, np.asarray(hi, float) / b.scale
-                w0[sl] = np.clip(w0[sl], lbw[sl], ubw[sl])
-            else:
-                w0[sl] = lbw[sl] = ubw[sl] = self.nominal_z(name)
-                if name.endswith(".axis"):  # |axis| = 1 holds identically: do not impose it
-                    lbg[nlp.axis_rows[name]], ubg[nlp.axis_rows[name]] = -np.inf, np.inf
+            z0 = start.z[name] if start is not None and name in start.free else self.nominal_z(name)
+            if init and name in init:
+                z0 = np.asarray(init[name], float) / b.scale
+            w0[sl] = z0
+            lo, hi = (bounds or {}).get(name, (b.lower, b.upper))
+            lbw[sl], ubw[sl] = np.asarray(lo, float) / b.scale, np.asarray(hi, float) / b.scale
+            w0[sl] = np.clip(w0[sl], lbw[sl], ubw[sl])
         t0 = time.perf_counter()
         sol = nlp.solver(x0=w0, lbx=lbw, ubx=ubw, lbg=lbg, ubg=ubg)
         elapsed = time.perf_counter() - t0
@@ -344,7 +359,8 @@ class HypothesisFit:
         m = self.fit.substeps
         values, z = {}, {}
         for name, b in self.blocks.items():
-            zb = wopt[nxG + nlp.z_offsets[name]: nxG + nlp.z_offsets[name] + b.size]
+            zb = wopt[nxG + nlp.z_offsets[name]: nxG + nlp.z_offsets[name] + b.size] if name in nlp.z_offsets \
+                else self.nominal_z(name)
             z[name] = zb
             v = np.clip(zb * b.scale, b.lower, b.upper)
             if name.endswith(".axis"):

@@ -32,7 +32,7 @@ def test_assembled_derivatives_equal_automatic_ones():
     model, joint, rec = _recording("cabinet", lambda j: (E("viscous_damping", j, 0.8),))
     rec = match_recording(model, rec).window(0.0, 1.5)
     hf = HypothesisFit(model, rec, [(joint, c) for c in CANDIDATES], sigma_q=noise_std(rec.q))
-    nlp = hf.nlp
+    nlp = hf.nlp_for(tuple(hf.blocks))
     rng = np.random.default_rng(1)
     nxG = nlp.nx * nlp.G
     w = np.concatenate([hf.x_init.ravel(order="F"), np.zeros(nlp.nz)])
