@@ -9,7 +9,7 @@ from verify_models import G, pendulum, slider
 
 from kinemaforge_opt.errors import DataError
 from kinemaforge_opt.io.recording import Recording
-from kinemaforge_opt.model import ArticulatedModel, Inertial, Joint, JointDynamics, Link
+from kinemaforge_opt.model import ArticulatedModel, Inertial, Joint, JointDynamics, JointLimits, Link
 from kinemaforge_opt.model.pinocchio import build_pin_model
 from kinemaforge_opt.verify import build_plant, energy_residual, mechanical_energy, simulate
 
@@ -54,6 +54,15 @@ def test_coulomb_friction_stops_slider_at_analytic_distance(discrete):
     tr = simulate(slider(m, coulomb=f), [0.0], [v0], 1.5, dt_out=0.01, discrete=discrete)
     assert tr.q[-1, 0] == pytest.approx(v0**2 / (2 * f / m), abs=2e-3)
     assert abs(tr.v[-1, 0]) < 1e-6
+
+
+def test_start_just_past_a_limit_is_no_kick():
+    # a measured q0 a noise-width (0.7 mrad) below a fitted lower limit, at rest, no force on a
+    # horizontal slider: it must stay at rest (Drake's stiff limit constraint used to kick it)
+    model = slider(2.0, limits=JointLimits(0.0007, 1.0))
+    tr = simulate(model, [0.0], [0.0], 0.5, dt_out=0.01, discrete=True)
+    np.testing.assert_allclose(tr.q[:, 0], 0.0007, atol=1e-6)
+    np.testing.assert_allclose(tr.v[:, 0], 0.0, atol=1e-6)
 
 
 def test_energy_is_conserved_without_damping():
