@@ -58,8 +58,11 @@ class Trial:
     bounds: dict = None  # physical (lower, upper) overrides the solve used
 
 
-def _ccs_order(rows: np.ndarray, cols: np.ndarray, nrow: int) -> np.ndarray:
-    return np.lexsort((rows, cols))
+def collocation_grid(t: np.ndarray, m: int) -> np.ndarray:
+    """Collocation times [s] of sample times ``t`` (T,) with ``m`` equal intervals per sample
+    interval: (m (T - 1) + 1,), the samples at every m-th point."""
+    inner = t[:-1, None] + np.diff(t)[:, None] * (np.arange(m) / m)[None, :]
+    return np.concatenate([inner.ravel(), t[-1:]])
 
 
 class _StructuredNLP:
@@ -83,7 +86,7 @@ class _StructuredNLP:
         n = fit.model.nq
         nx = 2 * n
         m = fit.substeps
-        t_grid = np.concatenate([np.linspace(a, b, m + 1)[:-1] for a, b in zip(rec.t[:-1], rec.t[1:])] + [rec.t[-1:]])
+        t_grid = collocation_grid(rec.t, m)
         G = t_grid.size
         T = rec.t.size
         self.n, self.nx, self.G, self.m = n, nx, G, m
@@ -166,18 +169,12 @@ class _StructuredNLP:
         f = ca.sumsqr((Qs - rec.q.T) / sigma[:, None]) / T
 
         # --- Jacobian of g: per kept interval a dense (nx, nb) block ---------------------------
-        def wcols(k):  # global columns of w_k = (x_k, x_k+1, z)
-            return np.concatenate([np.arange(nx * k, nx * (k + 1)), np.arange(nx * (k + 1), nx * (k + 2)),
-                                   nx * G + np.arange(nz)])
-
-        rows, cols = [], []
-        for i, k in enumerate(kept):
-            c = wcols(k)
-            rr = nx * i + np.arange(nx)
-            rows.append(np.repeat(rr[None, :], nb, axis=0).T.ravel(order="F"))  # column-major of (nx, nb)
-            cols.append(np.repeat(c[None, :], nx, axis=0).ravel(order="F"))
-        jr = np.concatenate(rows) if rows else np.zeros(0, int)
-        jc = np.concatenate(cols) if cols else np.zeros(0, int)
+        # global columns of w_k = (x_k, x_k+1, z) per kept interval: (K, nb)
+        wcols = np.concatenate([nx * kept[:, None] + np.arange(2 * nx)[None, :],
+                                np.broadcast_to(nx * G + np.arange(nz), (K, nz))], axis=1).astype(int)
+        # entry (r, c) of block i, column-major (r fastest): row nx i + r, column wcols[i, c]
+        jr = np.broadcast_to(nx * np.arange(K)[:, None, None] + np.arange(nx)[None, None, :], (K, nb, nx)).ravel()
+        jc = np.broadcast_to(wcols[:, :, None], (K, nb, nx)).ravel()
         Jall = ca.vec(f_j.map(K)(Xa, Xb, Ua, Ub, Hh, z))  # (nx*nb*K,) column-major per block
         extra_r, extra_c, extra_v = [], [], []
         for b in axis_blocks:
@@ -198,17 +195,13 @@ class _StructuredNLP:
         lam_g = ca.MX.sym("lam_g", ng)
         Lk = ca.reshape(lam_g[: nx * K], nx, K)
         Hall = ca.vec(f_h.map(K)(Xa, Xb, Ua, Ub, Hh, z, Lk))  # (nb*nb*K,)
-        hr, hc = [], []
-        for k in kept:
-            c = wcols(k)
-            hr.append(np.repeat(c[None, :], nb, axis=0).T.ravel(order="F"))
-            hc.append(np.repeat(c[None, :], nb, axis=0).ravel(order="F"))
-        hr = np.concatenate(hr) if hr else np.zeros(0, int)
-        hc = np.concatenate(hc) if hc else np.zeros(0, int)
+        # entry (a, b) of block k, column-major (a fastest): row wcols[k, a], column wcols[k, b]
+        hr = np.broadcast_to(wcols[:, None, :], (K, nb, nb)).ravel()
+        hc = np.broadcast_to(wcols[:, :, None], (K, nb, nb)).ravel()
         vals = [Hall]
         # objective: 2/(sigma^2 T) on the sampled q entries
-        obj_idx = np.array([nx * c + j for c in sample_cols for j in range(n)], dtype=int)
-        obj_w = np.array([2.0 / (sigma[j] ** 2 * T) for c in sample_cols for j in range(n)])
+        obj_idx = (nx * sample_cols[:, None] + np.arange(n)[None, :]).ravel()
+        obj_w = np.tile(2.0 / (sigma**2 * T), sample_cols.size)
         hr = np.concatenate([hr, obj_idx])
         hc = np.concatenate([hc, obj_idx])
         vals.append(lam_f * ca.DM(obj_w))
@@ -285,7 +278,7 @@ class HypothesisFit:
         rec = self.recording
         n = model.nq
         v0 = np.gradient(rec.q, rec.t, axis=0) if rec.v is None else rec.v
-        t_grid = np.concatenate([np.linspace(a, b, self.fit.substeps + 1)[:-1] for a, b in zip(rec.t[:-1], rec.t[1:])] + [rec.t[-1:]])
+        t_grid = collocation_grid(rec.t, self.fit.substeps)
         self.x_init = np.vstack([np.array([np.interp(t_grid, rec.t, c) for c in rec.q.T]),
                                  np.array([np.interp(t_grid, rec.t, c) for c in v0.T])])
         self.t_grid = t_grid

@@ -28,17 +28,27 @@ def _recording(category: str, effects, seed: int = 0):
     return obj.model, joint, Recording(ep.t, ep.joint_names, q, tau=ep.tau)
 
 
-def test_assembled_derivatives_equal_automatic_ones():
+def _point(hf, nlp, rng):
+    """A decision vector of ``nlp``: states from the data, every free parameter away from nominal
+    (so every term is active)."""
+    nxG = nlp.nx * nlp.G
+    w = np.concatenate([hf.x_init.ravel(order="F"), np.zeros(nlp.nz)])
+    for b in nlp.blocks:
+        sl = slice(nxG + nlp.z_offsets[b.name], nxG + nlp.z_offsets[b.name] + b.size)
+        w[sl] = hf.nominal_z(b.name) + 0.2 * rng.normal(size=b.size)
+    return w
+
+
+@pytest.mark.parametrize("subset", [False, True])
+def test_assembled_derivatives_equal_automatic_ones(subset):
     model, joint, rec = _recording("cabinet", lambda j: (E("viscous_damping", j, 0.8),))
     rec = match_recording(model, rec).window(0.0, 1.5)
     hf = HypothesisFit(model, rec, [(joint, c) for c in CANDIDATES], sigma_q=noise_std(rec.q))
-    nlp = hf.nlp_for(tuple(hf.blocks))
+    free = [n for c in ("coulomb_friction", "axis_tilt") for n in effect_parameters(model, joint, c)] \
+        if subset else tuple(hf.blocks)
+    nlp = hf.nlp_for(free)
     rng = np.random.default_rng(1)
-    nxG = nlp.nx * nlp.G
-    w = np.concatenate([hf.x_init.ravel(order="F"), np.zeros(nlp.nz)])
-    for name, b in hf.blocks.items():  # every parameter away from nominal, so every term is active
-        sl = slice(nxG + nlp.z_offsets[name], nxG + nlp.z_offsets[name] + b.size)
-        w[sl] = hf.nominal_z(name) + 0.2 * rng.normal(size=b.size)
+    w = _point(hf, nlp, rng)
     lam_g = rng.normal(size=nlp.ng)
     x = ca.MX.sym("x", w.size)
     lg = ca.MX.sym("lg", nlp.ng)
@@ -50,6 +60,30 @@ def test_assembled_derivatives_equal_automatic_ones():
     _, J = nlp.solver.get_function("nlp_jac_g")(w, [])
     assert np.allclose(np.triu(H), np.triu(H_auto), rtol=1e-9, atol=1e-9 * np.abs(H_auto).max())
     assert np.allclose(J.full(), J_auto, rtol=1e-12, atol=1e-12)
+
+
+def test_a_problem_with_fewer_free_parameters_is_the_full_one_at_nominal():
+    """The problem of a subset (other blocks folded in as constants) has the same objective and
+    defects as the problem with every block free, evaluated with those blocks at nominal."""
+    model, joint, rec = _recording("cabinet", lambda j: (E("viscous_damping", j, 0.8),))
+    rec = match_recording(model, rec).window(0.0, 1.5)
+    hf = HypothesisFit(model, rec, [(joint, c) for c in CANDIDATES], sigma_q=noise_std(rec.q))
+    sub = hf.nlp_for(effect_parameters(model, joint, "stribeck_friction"))
+    full = hf.nlp_for(tuple(hf.blocks))
+    w_sub = _point(hf, sub, np.random.default_rng(2))
+    nxG = sub.nx * sub.G
+    w_full = np.concatenate([w_sub[:nxG], np.zeros(full.nz)])
+    for name, b in hf.blocks.items():
+        o = nxG + full.z_offsets[name]
+        w_full[o: o + b.size] = w_sub[nxG + sub.z_offsets[name]: nxG + sub.z_offsets[name] + b.size] \
+            if name in sub.z_offsets else hf.nominal_z(name)
+    f_sub = sub.solver.oracle()(x=w_sub, p=[])
+    f_full = full.solver.oracle()(x=w_full, p=[])
+    assert float(f_sub["f"]) == pytest.approx(float(f_full["f"]), rel=1e-12)
+    g_sub, g_full = f_sub["g"].full().ravel(), f_full["g"].full().ravel()
+    assert sub.ng == full.ng - 1  # the fixed axis' unit-norm row is gone
+    assert np.allclose(g_sub, g_full[: sub.ng], rtol=1e-12, atol=1e-12)
+    assert np.abs(g_sub).max() > 1e-3  # the point is not a trivial solution
 
 
 def test_a_fixed_out_effect_is_absent_and_a_freed_one_is_recovered():
