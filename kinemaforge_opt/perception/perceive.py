@@ -181,7 +181,11 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
         clouds = [fuse(t, vs, voxel)[0] for t, vs in zip(times, views)]
         status = motion_status(clouds, seq.cameras, noise)
     t0 = stage("motion", t0)
-    tracker = Tracker(clouds, status, seq.cameras, noise, voxel)
+    radius = ICP_FINE_VOXELS * voxel
+    mid = times.size // 2
+    env = environment_planes(clouds[mid].points[status[mid] == STATIC], clouds[mid].points, radius)
+    t0 = stage("environment", t0, tick=False)
+    tracker = Tracker(clouds, status, seq.cameras, noise, voxel, tuple(env))
     proposals = propose_and_track(tracker)
     # a proposal seen at fewer steps than any joint fit needs relates to nothing: left out
     need = min(MIN_SAMPLES, times.size)
@@ -194,7 +198,6 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
             f"noise (σ ≈ {1e3 * float(noise.sigma(1.0)):.2g} mm at 1 m); "
             "there is no joint to infer"
         )
-    radius = ICP_FINE_VOXELS * voxel
     for s, c in enumerate(clouds):  # points on a tracked part move with it, whatever their own test said
         on_part = np.zeros(len(c.points), dtype=bool)
         for p in proposals:
@@ -202,8 +205,5 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
             if moved is not None:
                 on_part |= cKDTree(moved).query(c.points, distance_upper_bound=radius)[0] < np.inf
         status[s] = np.where(on_part, np.int8(MOVING), status[s])
-    t0 = stage("proposals+tracks", t0, tick=False)
-    mid = times.size // 2
-    env = environment_planes(clouds[mid].points[status[mid] == STATIC], clouds[mid].points, radius)
-    stage("environment", t0)
+    stage("proposals+tracks", t0)
     return Perception(times, clouds, status, noise, voxel, proposals, _tracks(proposals, times), env, timing, cpu)

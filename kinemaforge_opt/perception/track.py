@@ -29,6 +29,10 @@ within the fine ICP radius) − (times the cameras saw through them) is larger m
 track than left in place, and the track puts them in seen-through space at no more than a
 quarter of those steps; a tie with no such step also joins (a surface sliding along itself — a
 drawer's floor — looks the same under both hypotheses; only seen-through space tells them apart).
+The environment planes (floor, back wall) are never grown into: the floor next to a door's foot
+also slides along itself under the door's rotation or a drawer's pull, and wherever the voxel is
+coarser than the gap between part and floor (a 2.3 cm voxel at 160×120 bridges a door's 2 cm
+clearance) the tie would carry the growth over the whole floor.
 """
 
 from __future__ import annotations
@@ -41,7 +45,7 @@ from scipy.spatial import cKDTree
 from ..io.sequence import CameraInfo
 from .change import MOVING, STATIC, free_space_test, window_stack
 from .clouds import DepthNoise, TimeCloud, downsample
-from .segment import CLUSTER_VOXELS, clusters
+from .segment import CLUSTER_VOXELS, Plane, clusters
 
 # ICP correspondence radii in voxels: coarse (captures the candidate's basin), then fine.
 ICP_COARSE_VOXELS = 4.0
@@ -156,11 +160,14 @@ class Tracker:
     """Tracks proposals through fused time clouds (see module doc).
 
     clouds: the T time steps.  status: per step, (M_t,) STATIC/UNKNOWN/MOVING of its points.
-    cameras, noise: for the free-space verification.  voxel: the cloud's voxel edge [m]."""
+    cameras, noise: for the free-space verification.  voxel: the cloud's voxel edge [m].
+    background: the environment planes (:func:`segment.environment_planes`); growing never
+    takes a point within the fine ICP radius of one."""
 
     def __init__(self, clouds: list[TimeCloud], status: list[np.ndarray], cameras: dict[str, CameraInfo],
-                 noise: DepthNoise, voxel: float):
+                 noise: DepthNoise, voxel: float, background: tuple[Plane, ...] = ()):
         self.clouds, self.status, self.cameras, self.noise, self.voxel = clouds, status, cameras, noise, voxel
+        self.background = background
         self.targets = [c.points[s != STATIC] for c, s in zip(clouds, status)]
         self.trees = [cKDTree(t) if len(t) else None for t in self.targets]
         self._windows: dict[int, list[np.ndarray]] = {}
@@ -297,6 +304,8 @@ class Tracker:
         fine = ICP_FINE_VOXELS * self.voxel
         reach_r = CLUSTER_VOXELS * self.voxel
         tested = in_part.copy()
+        for plane in self.background:  # a floor slides along itself under a part's motion: never a tie to break
+            tested |= np.abs(plane.distance(cloud)) <= fine
         part = points
         for _ in range(GROW_ROUNDS):
             near = cKDTree(part).query(cloud, distance_upper_bound=reach_r)[0] < np.inf

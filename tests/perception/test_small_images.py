@@ -1,0 +1,36 @@
+"""Perception at a coarse resolution (160×120: a pixel footprint of ~1 cm at the working
+distance, a voxel of ~2.3 cm), scored against the synthetic world's ground-truth label images.
+
+At this voxel the floor next to a door's foot is within one growing step of the door, and the
+floor slides along itself under the door's rotation; the growing must not spread over it."""
+
+from __future__ import annotations
+
+import pytest
+
+
+@pytest.fixture(scope="module")
+def microwave(tmp_path_factory):
+    from problems.eval_perception import ground_truth, instance_case, run
+    from kinemaforge_opt.synth import generate_case
+
+    root = tmp_path_factory.mktemp("small") / "microwave"
+    generate_case(instance_case("microwave", 0, views=4, frames=12, width=160, height=120), root)
+    per, graph, _, _ = run(root / "sequence")
+    return per, graph, ground_truth(root)
+
+
+def test_door_does_not_grow_over_the_floor_at_160x120(microwave):
+    from problems.eval_perception import _confusion, score
+
+    per, graph, truth = microwave
+    result = score(per, graph, truth)
+    assert result["predicted"] == [("body", "door", "revolute")]
+    # before the environment planes bounded the growing: door IoU 0.12 (the door's part held
+    # most of the floor in front of it)
+    assert result["iou_moving"]["door"] >= 0.75
+    counts, _, _ = _confusion(per, graph, truth)
+    door_pixels = sum(n for (a, b), n in counts.items() if a not in ("base", "environment"))
+    floor_as_door = sum(n for (a, b), n in counts.items() if a not in ("base", "environment") and b == "environment")
+    # (the floor within the inlier distance, 3.5 cm here, of the door's foot still takes its label)
+    assert floor_as_door <= 0.2 * door_pixels
