@@ -84,6 +84,10 @@ SIMULATION_CHECK_S = 1.0
 # this fixed step in its scaled variables (q [rad or m], v × window [rad or m]).
 SIM_RTOL, SIM_ATOL = 1e-5, 1e-7
 STATE_FIT_STEP = 1e-4
+# ... and stops once an iteration changes its squared error or its scaled state by less than this
+# fraction (a 0.01 % change of the error is far below anything a prediction is judged by;
+# MINPACK's default, 1e-8, spent about twice the integrations on digits below the noise).
+STATE_FIT_TOL = 1e-4
 
 # The hypothesis search runs on block means of the recording at no less than this rate [Hz]:
 # the effects of the library are low-bandwidth forces, so a recording sampled faster carries no
@@ -1129,7 +1133,7 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
                 r0 = resid(z)
                 return np.stack([(resid(z + STATE_FIT_STEP * e) - r0) / STATE_FIT_STEP for e in np.eye(z.size)], axis=1)
 
-            fit = least_squares(resid, x0 / scale, jac=jac, method="lm")
+            fit = least_squares(resid, x0 / scale, jac=jac, method="lm", ftol=STATE_FIT_TOL, xtol=STATE_FIT_TOL)
             x0 = fit.x * scale
         else:
             window[:] = False
