@@ -25,6 +25,8 @@ from ..spatial import normalize
 from .motion import RelativeMotion
 
 JOINT_TYPES = ("rigid", "prismatic", "revolute", "helical")
+# A residual RMS this many times another's is a clear misfit (the usual 3σ level).
+SIGNIFICANCE = 3.0
 # Refinement budget: well-posed fits converge in 5–40 evaluations; a helix on a short arc is
 # nearly degenerate (pitch trades against axis tilt) and is stopped here rather than polished.
 MAX_NFEV = 60
@@ -221,31 +223,8 @@ def _fit_pose(kind: str, m: RelativeMotion) -> JointHypothesis:
             return R, c + B @ x[5:7] + x[7:, None] * a
 
         x0, n_glob, k = np.r_[np.zeros(7), d0], 7, 7
-    else:  # revolute / helical: screw axis from the rotation null space (Plücker line)
-        ref = n // 2
-        dR = np.einsum("nij,kj->nik", Rs, Rs[ref])  # R_t R_ref^T
-        dp = ps - np.einsum("nij,j->ni", dR, ps[ref])
-        a0 = np.linalg.svd((dR - np.eye(3)).reshape(-1, 3))[2][-1]
-        phi = _rot_residual(np.tile(np.eye(3), (n, 1, 1)), dR) @ a0
-        h0 = float(np.dot(dp @ a0, phi) / max(np.dot(phi, phi), 1e-300)) if kind == "helical" else 0.0
-        A = (np.eye(3) - dR).reshape(-1, 3)
-        c0 = np.linalg.lstsq(A, (dp - h0 * phi[:, None] * a0).reshape(-1), rcond=None)[0]
-        B = _tangent_basis(a0)
-        R_ref, p_ref = Rs[ref], ps[ref]
-        nh = 1 if kind == "helical" else 0
-
-        def model(x):
-            a = normalize(a0 + B @ x[:2])
-            cc = c0 + B @ x[2:4]
-            Rr = _rot(x[4:7][None])[0] @ R_ref
-            pr = p_ref + x[7:10]
-            h = x[10] if nh else 0.0
-            th = x[10 + nh :]
-            Ra = _rot(th[:, None] * a)
-            return Ra @ Rr, cc + np.einsum("nij,j->ni", Ra, pr - cc) + h * th[:, None] * a
-
-        x0, n_glob = np.r_[np.zeros(10), [h0] * nh, phi], 10 + nh
-        k = 9 + nh  # one gauge freedom (angle offset vs reference orientation)
+    else:
+        return _fit_pose_screw(kind, m)
 
     def fun(x):
         R, p = model(x)
@@ -262,9 +241,75 @@ def _fit_pose(kind: str, m: RelativeMotion) -> JointHypothesis:
         axis, q = _orient(a, x[7:])
         origin = c + B @ x[5:7] + x[7] * a
         return dataclasses.replace(_finish(kind, m, axis, origin, 0.0, None, q, r.ravel(), pos_res, k), **rot)
-    a = normalize(a0 + B @ x[:2])
-    cc = c0 + B @ x[2:4]
-    h = x[10] if kind == "helical" else 0.0
+
+
+def _rotation_start(m: RelativeMotion, ref: int, helical: bool):
+    """Screw start from the rotations: axis = null space of R_t R_ref^T − I, angles = the
+    rotation vectors' components along it, centre (and pitch) by least squares on the positions."""
+    Rs, ps = m.Rs, m.positions
+    dR = np.einsum("nij,kj->nik", Rs, Rs[ref])  # R_t R_ref^T
+    dp = ps - np.einsum("nij,j->ni", dR, ps[ref])
+    a0 = np.linalg.svd((dR - np.eye(3)).reshape(-1, 3))[2][-1]
+    phi = _rot_residual(np.tile(np.eye(3), (m.n, 1, 1)), dR) @ a0
+    h0 = float(np.dot(dp @ a0, phi) / max(np.dot(phi, phi), 1e-300)) if helical else 0.0
+    c0 = np.linalg.lstsq((np.eye(3) - dR).reshape(-1, 3), (dp - h0 * phi[:, None] * a0).reshape(-1), rcond=None)[0]
+    return a0, c0, phi, h0
+
+
+def _position_start(m: RelativeMotion, ref: int, helical: bool):
+    """Screw start from the positions alone (plane + circle, see :func:`_circle`): needed when the
+    track's orientations are unreliable (a flat door registered flipped by π on some frames), where
+    the rotation start's angles are wrong although the positions trace a clean arc."""
+    ps = m.positions
+    a0, centre, _, _, th = _circle(ps)
+    th = th - th[ref]
+    h0 = float(np.dot((ps - ps[ref]) @ a0, th) / max(np.dot(th, th), 1e-300)) if helical else 0.0
+    return a0, centre, th, h0
+
+
+def _adequate(r: np.ndarray, sp: float, sr: float) -> bool:
+    """(N, 6) normalised position + rotation residuals both within SIGNIFICANCE·√3 of the noise (RMS per sample)."""
+    lim = (SIGNIFICANCE * np.sqrt(3.0)) ** 2
+    return bool(np.mean(np.sum(r[:, :3] ** 2, axis=1)) <= lim and np.mean(np.sum(r[:, 3:] ** 2, axis=1)) <= lim)
+
+
+def _fit_pose_screw(kind: str, m: RelativeMotion) -> JointHypothesis:
+    """Revolute / helical fit of a full-pose motion: refined from a rotation-based and a
+    position-based start (same objective), the lower robust cost wins."""
+    Rs, ps, sp, sr, n = m.Rs, m.positions, m.sigma_position, m.sigma_rotation, m.n
+    ref = n // 2
+    nh = 1 if kind == "helical" else 0
+    n_glob, k = 10 + nh, 9 + nh  # one gauge freedom (angle offset vs reference orientation)
+    R_ref, p_ref = Rs[ref], ps[ref]
+    best = None
+    for start in (_rotation_start, _position_start):
+        if best is not None and _adequate(best[2], sp, sr):
+            break  # the first start already explains both channels to the noise level
+        a0, c0, phi, h0 = start(m, ref, bool(nh))
+        B = _tangent_basis(a0)
+
+        def model(x, a0=a0, c0=c0, B=B):
+            a = normalize(a0 + B @ x[:2])
+            cc = c0 + B @ x[2:4]
+            Rr = _rot(x[4:7][None])[0] @ R_ref
+            pr = p_ref + x[7:10]
+            h = x[10] if nh else 0.0
+            th = x[10 + nh :]
+            Ra = _rot(th[:, None] * a)
+            return Ra @ Rr, cc + np.einsum("nij,j->ni", Ra, pr - cc) + h * th[:, None] * a
+
+        def fun(x, model=model):
+            R, p = model(x)
+            return np.concatenate([(ps - p) / sp, _rot_residual(R, Rs) / sr], axis=1).ravel()
+
+        x, r = _solve(fun, np.r_[np.zeros(10), [h0] * nh, phi], n_glob, n, 6)
+        cost = _robust_chi2(r)
+        if best is None or cost < best[0]:
+            best = (cost, x, r.reshape(n, 6), normalize(a0 + B @ x[:2]), c0 + B @ x[2:4])
+    _, x, r, a, cc = best
+    pos_res = r[:, :3] * sp
+    rot = dict(rotation_rms=float(np.sqrt(np.mean(np.sum((r[:, 3:] * sr) ** 2, axis=1)))), rotation_sigma=float(sr))
+    h = x[10] if nh else 0.0
     axis, q = _orient(a, x[n_glob:])
     origin = cc + a * np.dot(ps[0] - cc, a)
     radius = float(np.linalg.norm((ps[0] - cc) - a * np.dot(ps[0] - cc, a)))
@@ -273,6 +318,20 @@ def _fit_pose(kind: str, m: RelativeMotion) -> JointHypothesis:
 
 
 # --------------------------------------------------------------------------- position only
+
+
+def _circle(ps: np.ndarray):
+    """Plane + algebraic circle fit of (N, 3) points -> (axis (3,) = plane normal, centre (3,),
+    radius [m], U0 (3, 2) in-plane basis, angles (N,) about +axis, unwrapped) with (u, v, axis)
+    right-handed."""
+    mean = ps.mean(axis=0)
+    U0 = np.linalg.svd(ps - mean)[2][:2].T
+    a0 = np.cross(U0[:, 0], U0[:, 1])
+    uv = (ps - mean) @ U0
+    sol = np.linalg.lstsq(np.c_[2 * uv, np.ones(len(ps))], np.sum(uv**2, axis=1), rcond=None)[0]
+    r0 = float(np.sqrt(max(sol[2] + sol[:2] @ sol[:2], 0.0)))
+    th0 = np.unwrap(np.arctan2(uv[:, 1] - sol[1], uv[:, 0] - sol[0]))
+    return a0, mean + U0 @ sol[:2], r0, U0, th0
 
 
 def _fit_points(kind: str, m: RelativeMotion) -> JointHypothesis:
@@ -291,13 +350,7 @@ def _fit_points(kind: str, m: RelativeMotion) -> JointHypothesis:
 
         x0, n_glob, k = np.r_[np.zeros(4), (ps - mean) @ a0], 4, 4
     else:  # revolute / helical: plane (normal = axis) + algebraic circle fit in that plane
-        U0 = Vt[:2].T
-        a0 = np.cross(U0[:, 0], U0[:, 1])  # right-handed (u, v, a): angles run about +a
-        uv = (ps - mean) @ U0
-        sol = np.linalg.lstsq(np.c_[2 * uv, np.ones(n)], np.sum(uv**2, axis=1), rcond=None)[0]
-        centre0 = mean + U0 @ sol[:2]
-        r0 = float(np.sqrt(max(sol[2] + sol[:2] @ sol[:2], 0.0)))
-        th0 = np.unwrap(np.arctan2(uv[:, 1] - sol[1], uv[:, 0] - sol[0]))
+        a0, centre0, r0, U0, th0 = _circle(ps)
         nh = 1 if kind == "helical" else 0
         B = _tangent_basis(a0)
 
@@ -346,5 +399,32 @@ def fit_relation(kind: str, motion: RelativeMotion) -> JointHypothesis:
 
 
 def fit_all(motion: RelativeMotion) -> dict[str, JointHypothesis]:
-    """Every relation type fitted to ``motion``, keyed by type."""
-    return {kind: fit_relation(kind, motion) for kind in JOINT_TYPES}
+    """Every relation type fitted to ``motion``, keyed by type.
+
+    Full-pose motions whose orientations contradict their positions are fitted on the positions
+    alone: when the better of the revolute and helical fits that must explain both misfits the
+    positions by more than SIGNIFICANCE times the revolute fit of the positions alone (both floored
+    at the white-noise level), the rotations follow no screw motion the positions allow (see
+    :func:`rotations_contradict`)."""
+    hyps = {kind: fit_relation(kind, motion) for kind in JOINT_TYPES}
+    screw = min(hyps["revolute"], hyps["helical"], key=lambda h: h.residual_rms)
+    if motion.Rs is None or screw.residual_rms <= SIGNIFICANCE * np.sqrt(3.0) * motion.sigma_position:
+        return hyps  # positions fitted to the noise level: no contradiction possible
+    points = dataclasses.replace(motion, Rs=None, sigma_rotation=0.0)
+    revolute = _fit_points("revolute", points)
+    if not rotations_contradict(screw, revolute):
+        return hyps
+    return {kind: revolute if kind == "revolute" else _fit_points(kind, points) for kind in JOINT_TYPES}
+
+
+def rotations_contradict(full: JointHypothesis, points: JointHypothesis) -> bool:
+    """True when the full-pose screw fit ``full`` misfits the positions by more than SIGNIFICANCE
+    times the position-only hinge fit ``points`` (RMS floored at √3·σ).
+
+    A registration of a part with a symmetric shape (a flat door, a drawer front) may come out
+    turned by the symmetry (π about the panel's normal) on some frames: the orientation jumps,
+    the position — the centroid of the registered points, which the symmetry maps onto itself —
+    does not.  A hinge that explains such orientations then misses the positions (a π swing), the
+    position-only fit does not: the orientations are set aside for this pair."""
+    floor = np.sqrt(3.0) * full.noise_sigma
+    return max(full.residual_rms, floor) > SIGNIFICANCE * max(points.residual_rms, floor)

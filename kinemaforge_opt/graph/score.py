@@ -26,9 +26,7 @@ import dataclasses
 import numpy as np
 from scipy.special import logsumexp
 
-from .fit import JointHypothesis
-
-SIGNIFICANCE = 3.0
+from .fit import SIGNIFICANCE, JointHypothesis
 # Which simpler models each richer model must clearly beat to be identifiable.
 SIMPLER = {"rigid": (), "prismatic": ("rigid",), "revolute": ("rigid", "prismatic"), "helical": ("revolute", "prismatic")}
 

@@ -197,9 +197,11 @@ def _log(x: float) -> float:
 
 def _tree(root, parts, edges, arcs) -> KinematicTree:
     """Order arcs parent-before-child and name joints j0, j1, …  A child whose chosen relation
-    is rigid, with a residual at the noise level, is part of its parent's link: its members join the
-    parent part, its own children hang from the parent, and log ρ of that arc still counts in the
-    tree's score."""
+    is rigid is part of its parent's link: its members join the parent part, its own children hang
+    from the parent, and log ρ of that arc still counts in the tree's score.  The tree's joints
+    are therefore all moving ones; a fixed joint would claim a separate rigid body that the data
+    do not show (a track that moves but that no joint type explains — a fragment registered
+    erratically — is no body of its own either)."""
     rigid_score = 0.0
     owner = {p: p for p in parts}
 
@@ -210,10 +212,7 @@ def _tree(root, parts, edges, arcs) -> KinematicTree:
 
     for a, b in arcs:
         h = _best_type(edges[(a, b)])
-        # adequate rigid fits only (as in _merge): a rigid "best" that misfits by far more than
-        # the noise is no evidence of a fixed attachment (a poorly tracked part) and stays visible
-        # as a fixed joint; all-zero ρ is no choice either (greedy's last resort)
-        if h.type == "rigid" and h.confidence > 0 and _adequate_rigid(h):
+        if h.type == "rigid" and h.confidence > 0:  # all-zero ρ is no choice (greedy's last resort)
             owner[b] = a
             rigid_score += _log(h.confidence)
     if any(owner[p] != p for p in parts):
