@@ -1074,6 +1074,8 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
     observer would give it; those samples are then fitted, not predicted, and come back as NaN.
     (A state differentiated from a few noisy samples at the edge of a span can be so far off
     that it dominates the prediction error of every model alike.)"""
+    from bisect import bisect_right
+
     import pinocchio as pin
     from scipy.integrate import solve_ivp
     from scipy.optimize import least_squares
@@ -1094,19 +1096,23 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
 
     terms = [[(EFFECTS[e].force, tuple(getattr(j.dynamics, p) for p in EFFECTS[e].params))
               for e in dynamics_effects(j.dynamics)] for j in joints]
-    t_rec, last = rec.t, rec.t.size - 1
+    # tau linear between samples (held at the ends): per interval i its start and slope
+    t_list, last = rec.t.tolist(), rec.t.size - 1
+    slope = np.diff(tau, axis=0) / np.diff(rec.t)[:, None]
+    out = np.empty(2 * n)
 
     def rhs(t, x):
         q, v = x[:n], x[n:]
-        i = min(max(int(np.searchsorted(t_rec, t)) - 1, 0), last - 1)  # tau linear between samples
-        w = min(max((t - t_rec[i]) / (t_rec[i + 1] - t_rec[i]), 0.0), 1.0)
-        u = (1 - w) * tau[i] + w * tau[i + 1]
+        i = min(max(bisect_right(t_list, t) - 1, 0), last - 1)
+        u = tau[i] + slope[i] * min(max(t - t_list[i], 0.0), t_list[i + 1] - t_list[i])
         for k in range(n):
             for force, params in terms[k]:
                 u[k] += force(q[k], v[k], *params)
             if laws[k] is not None:
                 u[k] += laws[k](q[k], v[k])
-        return np.concatenate([v, pin.aba(pm, pd, q, v, u)])
+        out[:n] = v
+        out[n:] = pin.aba(pm, pd, q, v, u)
+        return out.copy()
 
     def run(x0: np.ndarray, t_eval: np.ndarray) -> np.ndarray:
         sol = solve_ivp(rhs, (t_eval[0], t_eval[-1]), x0, t_eval=t_eval, method="LSODA", rtol=SIM_RTOL, atol=SIM_ATOL)

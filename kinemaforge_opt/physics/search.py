@@ -134,9 +134,9 @@ class _StructuredNLP:
         nb = 2 * nx + nz
         J = ca.densify(ca.jacobian(d, wk))
         H = ca.densify(ca.hessian(ca.dot(lam, d), wk)[0])
-        f_d = ca.Function("d", [xk, xk1, uk, uk1, h, zs], [d], {"cse": True})
-        f_j = ca.Function("j", [xk, xk1, uk, uk1, h, zs], [J], {"cse": True})
-        f_h = ca.Function("h", [xk, xk1, uk, uk1, h, zs, lam], [H], {"cse": True})
+        f_d = ca.Function("d", [xk, xk1, uk, uk1, h, zs], [d])
+        f_j = ca.Function("j", [xk, xk1, uk, uk1, h, zs], [J])
+        f_h = ca.Function("h", [xk, xk1, uk, uk1, h, zs, lam], [H])
         self.sizes = (f_d.n_instructions(), f_j.n_instructions(), f_h.n_instructions())
 
         U = np.array([np.interp(t_grid, rec.t, c) for c in rec.tau.T]) if rec.tau is not None else np.zeros((n, G))
