@@ -5,8 +5,8 @@ warped drawer rail leaves a smooth, millimetre-level model error that white-nois
 "explain" with every extra parameter (a drifting helix, a 6 m-radius hinge).  The χ² is therefore
 rescaled by c = s·min(1, σ²/σ_flex²): s = (1 − ρ₁)/(1 + ρ₁) is the effective sample fraction of
 an AR(1) process, ρ₁ the lag-1 autocorrelation of the best-fitting model's residuals,
-and σ_flex the per-coordinate RMS of those residuals — the level of noise *plus* model error, the
-σ that Mallows' Cp takes from the largest model.  Latent joint values count s·N parameters.
+and σ_flex the per-coordinate scale of those residuals — the level of noise *plus* model error,
+the σ that Mallows' Cp takes from the largest model (a robust scale, see ``effective_fraction``).  Latent joint values count s·N parameters.
 White residuals at the sensor noise level give c = 1 and plain BIC.
 
 Identifiability: a richer model is a candidate only when each simpler model it would replace is
@@ -33,13 +33,21 @@ SIMPLER = {"rigid": (), "prismatic": ("rigid",), "revolute": ("rigid", "prismati
 
 def effective_fraction(hyps: dict[str, JointHypothesis]) -> tuple[float, float]:
     """(s, c): effective independent-sample fraction s ∈ [1/N, 1] of a pair's data and the χ²
-    scale c = s·min(1, σ²/σ_flex²) (see module doc)."""
-    ref = min(hyps.values(), key=lambda h: h.residual_rms)  # the best fit: noise + model error
+    scale c = s·min(1, σ²/σ_flex²) (see module doc).
+
+    The best fit is the one with the lowest robust χ² (the fits' own objective), and σ_flex²/σ²
+    the mean squared normalised residual that, were all residuals alike, would give that χ² under
+    the soft-L1 loss 2(√(1 + r²) − 1): a model error spread over every sample counts in full, as
+    in an RMS, while a few gross outliers (one mis-registered frame) raise it only in proportion
+    to their share — an RMS would let one 7 cm jump scale every model's χ² down fifty-fold and
+    leave a drawer's 25 cm stroke indistinguishable from rest."""
+    ref = min(hyps.values(), key=lambda h: h.chi2)  # the best fit: noise + model error
     n = ref.n_samples
     rho1 = float(np.clip(ref.residual_autocorr, 0.0, 1.0 - 1.0 / n))
     s = max((1.0 - rho1) / (1.0 + rho1), 1.0 / n)
-    sigma_flex2 = ref.residual_rms**2 / 3.0
-    return s, s * min(1.0, ref.noise_sigma**2 / sigma_flex2) if sigma_flex2 > 0 else s
+    per_residual = ref.chi2 / (n * (6 if ref.rotation_sigma > 0 else 3))
+    flex2 = (per_residual / 2.0 + 1.0) ** 2 - 1.0  # σ_flex²/σ², inverting the soft-L1 loss
+    return s, s * min(1.0, 1.0 / flex2) if flex2 > 0 else s
 
 
 def score_pair(hyps: dict[str, JointHypothesis]) -> dict[str, JointHypothesis]:
