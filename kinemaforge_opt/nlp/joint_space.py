@@ -130,6 +130,13 @@ def limit_side(model: ArticulatedModel, rec: Recording) -> dict[str, tuple[float
     return out
 
 
+def collocation_grid(t: np.ndarray, m: int) -> np.ndarray:
+    """Collocation times [s] of sample times ``t`` (T,) with ``m`` equal intervals per sample
+    interval: (m (T - 1) + 1,), the samples at every m-th point."""
+    inner = t[:-1, None] + np.diff(t)[:, None] * (np.arange(m) / m)[None, :]
+    return np.concatenate([inner.ravel(), t[-1:]])
+
+
 def velocity_estimate(rec: Recording) -> np.ndarray:
     """Recorded v, or central differences of q (T, n)."""
     return rec.v if rec.v is not None else np.gradient(rec.q, rec.t, axis=0)
@@ -320,7 +327,7 @@ def build_joint_space_fit(
     m = int(substeps)
     if m < 1:
         raise KinemaforgeError(f"substeps must be >= 1, got {substeps}")
-    t_grid = np.concatenate([np.linspace(a, b, m + 1)[:-1] for a, b in zip(rec.t[:-1], rec.t[1:])] + [rec.t[-1:]])
+    t_grid = collocation_grid(rec.t, m)
     G = t_grid.size  # collocation points; samples sit at columns 0, m, 2m, …
     prob = Problem(f"calibrate_{model.name}")
     v0 = velocity_estimate(rec)

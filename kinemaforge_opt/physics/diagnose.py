@@ -478,15 +478,18 @@ def _at_bound_values(trial: Trial, names: list[str], nominal_z: dict) -> bool:
 
 
 def _calibration(model: ArticulatedModel, rec: Recording, trial: Trial, effects: list[tuple[str, str]],
-                 stops: dict, segment_s: float | None, sigma_q: np.ndarray, eps: np.ndarray | None = None) -> Calibration:
+                 stops: dict, segment_s: float | None, sigma_q: np.ndarray, eps: np.ndarray | None = None,
+                 fit=None) -> Calibration:
     """A :class:`Calibration` of ``model`` with the parameters of ``effects`` at the values of
-    ``trial`` (95 % intervals from the fit's sensitivity)."""
+    ``trial`` (95 % intervals from the fit's sensitivity).  fit: the joint-space fit of exactly
+    those parameters on ``rec`` if already built (a :class:`HypothesisFit`'s), else built here."""
     from ..calibration import _result
     from ..nlp.problem import Result
 
-    names = [n for j, e in effects for n in _free_for(model, j, e)]
-    fit = build_joint_space_fit(model, rec, names, energy="off", segment_s=segment_s, limit_stops=stops,
-                                sigma_q=sigma_q, friction_eps=eps)
+    if fit is None:
+        names = [n for j, e in effects for n in _free_for(model, j, e)]
+        fit = build_joint_space_fit(model, rec, names, energy="off", segment_s=segment_s, limit_stops=stops,
+                                    sigma_q=sigma_q, friction_eps=eps)
     z = np.concatenate([trial.z[b.name] for b in fit.blocks]) if fit.blocks else np.zeros(0)
     res = Result(trial.success, trial.status, trial.iterations, float("nan"), {}, {}, {}, trial.solve_time_s)
     return _result(fit, res, trial.X, z, trial.solve_time_s)
@@ -940,7 +943,7 @@ def diagnose(
         final_full = full.solve(names, init={n: current.values[n] for n in names}, bounds=current.bounds,
                                 x0=full.states_from(t_s, current.X)) if chosen else nominal_full
         nominal = _calibration(model, fit_rec, nominal_full, [], stops, segment_s, sigma_q, eps)
-        final = _calibration(model, fit_rec, final_full, chosen, stops, segment_s, sigma_q, eps)
+        final = _calibration(model, fit_rec, final_full, chosen, stops, segment_s, sigma_q, eps, fit=full.fit)
     # An effect the model lacked whose 95 % interval still holds its "off" value (zero force, unit
     # inertia ratio, nominal axis) is not supported by the data, whatever the BIC of the search
     # said (a fit can gain from reaching another optimum of the other effects): drop it, the

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
-from ..nlp.joint_space import build_joint_space_fit
+from ..nlp.joint_space import build_joint_space_fit, collocation_grid
 from .effects import EFFECTS
 
 # CPU budget of one hypothesis solve: this many derivative evaluations (timed at build), at least
@@ -58,11 +58,11 @@ class Trial:
     bounds: dict = None  # physical (lower, upper) overrides the solve used
 
 
-def collocation_grid(t: np.ndarray, m: int) -> np.ndarray:
-    """Collocation times [s] of sample times ``t`` (T,) with ``m`` equal intervals per sample
-    interval: (m (T - 1) + 1,), the samples at every m-th point."""
-    inner = t[:-1, None] + np.diff(t)[:, None] * (np.arange(m) / m)[None, :]
-    return np.concatenate([inner.ravel(), t[-1:]])
+def _sparsity(nrow: int, ncol: int, rows: np.ndarray, cols: np.ndarray) -> "ca.Sparsity":
+    """The CasADi pattern of distinct entries (rows, cols) already in column-major order."""
+    import casadi as ca
+
+    return ca.Sparsity(nrow, ncol, np.searchsorted(cols, np.arange(ncol + 1)).tolist(), rows.tolist())
 
 
 class _StructuredNLP:
@@ -187,7 +187,7 @@ class _StructuredNLP:
         jc = np.concatenate([jc, np.array(extra_c, int)])
         jv = ca.vertcat(Jall, *extra_v) if extra_v else Jall
         order = np.lexsort((jr, jc))
-        sp_j = ca.Sparsity.triplet(ng, nw, jr[order].tolist(), jc[order].tolist())
+        sp_j = _sparsity(ng, nw, jr[order], jc[order])
         jac = ca.MX(sp_j, jv[order.tolist()])
 
         # --- Hessian of the Lagrangian, upper triangle, duplicates summed ----------------------
@@ -220,7 +220,7 @@ class _StructuredNLP:
 
         S = sps.csc_matrix((np.ones(src.size), (inv, src)), shape=(uniq.size, hv.numel()))
         S_dm = ca.DM(ca.Sparsity(S.shape[0], S.shape[1], S.indptr.tolist(), S.indices.tolist()), S.data)
-        sp_h = ca.Sparsity.triplet(nw, nw, (uniq % nw).tolist(), (uniq // nw).tolist())
+        sp_h = _sparsity(nw, nw, uniq % nw, uniq // nw)
         hess = ca.MX(sp_h, ca.mtimes(S_dm, hv))
 
         p = ca.MX.sym("p", 0)
