@@ -116,7 +116,8 @@ def fit_initial_velocity(
     """(n,) the initial velocity whose Drake replay best matches the recorded q over the first
     ``window_s`` seconds (at least 3 samples), by Gauss-Newton on finite-difference sensitivities
     (one replay per joint and iteration), started from the finite-difference estimate and kept
-    within twice the largest finite-difference speed of each joint.
+    within twice the largest finite-difference speed of each joint, and away from a stop the
+    joint starts on.
 
     Why: at a visual rate (~10 Hz) the first finite difference of q is a poor velocity (a door
     pushed from rest shows ~0.5 rad/s), and the replay's drift would mostly measure that."""
@@ -130,6 +131,17 @@ def fit_initial_velocity(
     # the answer stays within the speeds the recording shows (a joint pinned on a stop is
     # insensitive to v0, and an unbounded step would run off there)
     bound = 2.0 * np.abs(recorded_velocity(rec)).max(axis=0) + scale
+    lower, upper = -bound, bound.copy()
+    # a joint that starts on a stop (within 1 % of its range) cannot be moving into it: such a v0
+    # only buys a bounce off the stop, which the fit would use to soak up model error
+    for k, j in enumerate(model.movable_joints):
+        if j.limits is not None and j.type != "continuous" and j.limits.upper > j.limits.lower:
+            tol = 0.01 * (j.limits.upper - j.limits.lower)
+            if rec.q[0, k] <= j.limits.lower + tol:
+                lower[k] = 0.0
+            if rec.q[0, k] >= j.limits.upper - tol:
+                upper[k] = 0.0
+    v = np.clip(v, lower, upper)
 
     def residual(v0):
         return (simulate_at(model, rec.q[0], v0, t_fit, forcing, discrete).q - q_fit)[1:].ravel()
@@ -142,7 +154,7 @@ def fit_initial_velocity(
             dv[j] = 1e-3 * scale[j]
             J[:, j] = (residual(v + dv) - r) / dv[j]
         step = np.linalg.lstsq(J, -r, rcond=None)[0]
-        v_new = np.clip(v + step, -bound, bound)
+        v_new = np.clip(v + step, lower, upper)
         step = v_new - v
         r_new = residual(v_new)
         if r_new @ r_new >= r @ r:

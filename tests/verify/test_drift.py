@@ -80,3 +80,19 @@ def test_model_joint_missing_from_recording_is_named(settled):
 def test_bad_horizons(settled):
     with pytest.raises(DataError, match="horizons_s"):
         drift(_model(), settled, horizons_s=(1, -5))
+
+
+def test_initial_velocity_never_points_into_the_stop_the_joint_starts_on():
+    # a 4 kg slider pushed by 8 N from rest on its lower stop (x = a t²/2, a = 2 m/s²), seen at
+    # 4 Hz; the model is half as heavy, so it runs ahead, and a v0 into the stop (a bounce that
+    # wastes time) would fit the first frames better.  The truth, v0 = 0, is the only start
+    # that does not move into the stop.
+    from verify_models import JointLimits
+
+    from kinemaforge_opt.verify.drift import fit_initial_velocity
+
+    t = np.arange(0.0, 1.5, 0.25)
+    x = 0.5 * 2.0 * t**2
+    rec = Recording(t, ("x",), x[:, None], tau=np.full((t.size, 1), 8.0))
+    model = slider(2.0, limits=JointLimits(0.0, 5.0))
+    assert fit_initial_velocity(model, rec)[0] == pytest.approx(0.0, abs=1e-9)
