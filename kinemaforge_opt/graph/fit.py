@@ -267,24 +267,16 @@ def _position_start(m: RelativeMotion, ref: int, helical: bool):
     return a0, centre, th, h0
 
 
-def _adequate(r: np.ndarray, sp: float, sr: float) -> bool:
-    """(N, 6) normalised position + rotation residuals both within SIGNIFICANCE·√3 of the noise (RMS per sample)."""
-    lim = (SIGNIFICANCE * np.sqrt(3.0)) ** 2
-    return bool(np.mean(np.sum(r[:, :3] ** 2, axis=1)) <= lim and np.mean(np.sum(r[:, 3:] ** 2, axis=1)) <= lim)
-
-
 def _fit_pose_screw(kind: str, m: RelativeMotion) -> JointHypothesis:
-    """Revolute / helical fit of a full-pose motion: refined from a rotation-based and a
-    position-based start (same objective), the lower robust cost wins."""
+    """Revolute / helical fit of a full-pose motion, refined from the better (lower robust cost)
+    of a rotation-based and a position-based start."""
     Rs, ps, sp, sr, n = m.Rs, m.positions, m.sigma_position, m.sigma_rotation, m.n
     ref = n // 2
     nh = 1 if kind == "helical" else 0
     n_glob, k = 10 + nh, 9 + nh  # one gauge freedom (angle offset vs reference orientation)
     R_ref, p_ref = Rs[ref], ps[ref]
-    best = None
+    starts = []
     for start in (_rotation_start, _position_start):
-        if best is not None and _adequate(best[2], sp, sr):
-            break  # the first start already explains both channels to the noise level
         a0, c0, phi, h0 = start(m, ref, bool(nh))
         B = _tangent_basis(a0)
 
@@ -302,11 +294,12 @@ def _fit_pose_screw(kind: str, m: RelativeMotion) -> JointHypothesis:
             R, p = model(x)
             return np.concatenate([(ps - p) / sp, _rot_residual(R, Rs) / sr], axis=1).ravel()
 
-        x, r = _solve(fun, np.r_[np.zeros(10), [h0] * nh, phi], n_glob, n, 6)
-        cost = _robust_chi2(r)
-        if best is None or cost < best[0]:
-            best = (cost, x, r.reshape(n, 6), normalize(a0 + B @ x[:2]), c0 + B @ x[2:4])
-    _, x, r, a, cc = best
+        x0 = np.r_[np.zeros(10), [h0] * nh, phi]
+        starts.append((_robust_chi2(fun(x0)), fun, x0, a0, c0, B))
+    _, fun, x0, a0, c0, B = min(starts, key=lambda s: s[0])
+    x, r = _solve(fun, x0, n_glob, n, 6)
+    r = r.reshape(n, 6)
+    a, cc = normalize(a0 + B @ x[:2]), c0 + B @ x[2:4]
     pos_res = r[:, :3] * sp
     rot = dict(rotation_rms=float(np.sqrt(np.mean(np.sum((r[:, 3:] * sr) ** 2, axis=1)))), rotation_sigma=float(sr))
     h = x[10] if nh else 0.0
