@@ -1,10 +1,12 @@
 """Fit each candidate joint relation — rigid, prismatic, revolute, helical — to a relative motion.
 
 Each fit is a closed-form initialiser (chordal mean, principal line, screw / Plücker axis from
-the rotation null space, plane + circle fit for position-only tracks) followed by a robust
-refinement (scipy ``least_squares``, soft-L1 loss on residuals normalised by the estimated
-noise σ, so the loss switches to linear beyond ~1σ).  Latent joint values (one per sample) are
-refined jointly with a sparse Jacobian.
+the rotation null space or — whichever starts lower — plane + circle fit of the positions, the
+only one for position-only tracks) followed by a robust refinement (scipy ``least_squares``,
+soft-L1 loss on residuals normalised by the estimated noise σ, so the loss switches to linear
+beyond ~1σ).  Latent joint values (one per sample) are refined jointly with a sparse Jacobian.
+A full-pose pair whose orientations contradict its positions (no screw fits both; see
+:func:`fit_all`) is fitted on its positions alone.
 
 Scoring (Sturm et al., JAIR 2011): BIC = χ² + k ln N with χ² the robust sum of normalised
 squared residuals, k the model's parameters *including* its N latent joint values (so pure
