@@ -1132,8 +1132,14 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
             tw = rec.t[window]
             scale = np.concatenate([np.full(n, 1.0), np.full(n, 1.0 / max(tw[-1] - tw[0], 1e-9))])
 
+            seen: dict[bytes, np.ndarray] = {}  # residuals by z: MINPACK asks for the Jacobian where it just evaluated them
+
             def resid(z):
-                return (run(z * scale, tw) - rec.q[window]).ravel()
+                key = np.asarray(z, float).tobytes()
+                if key not in seen:
+                    seen.clear()
+                    seen[key] = (run(z * scale, tw) - rec.q[window]).ravel()
+                return seen[key]
 
             def jac(z):
                 # forward differences with a fixed step, far above the integration error (MINPACK's
