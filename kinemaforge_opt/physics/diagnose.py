@@ -7,11 +7,12 @@
    sampled at ``SEARCH_RATE_HZ`` or more (a faster recording is averaged down; its noise level is
    re-estimated there).  Per round only ``SCREEN`` hypotheses, ranked by a linear
    inverse-dynamics pre-screen, plus those the previous round found strong, get an NLP fit.
-   Every hypothesis (a set of (joint, effect) pairs) is a fit of one shared collocation NLP built once per recording
+   Every hypothesis (a set of (joint, effect) pairs) is a fit of one shared collocation fit built once per recording
    (:mod:`.search`; effects left out are fixed at their "off" values), with physical sign bounds
    and identifiability bounds (a stop inside the half of the recorded range on its side, a
-   Stribeck speed below half the peak speed), states started from the data, and force effects
-   started twice (zero and the inverse-dynamics least-squares estimate; the better fit is kept).
+   Stribeck speed below half the peak speed), states started from the data, and new force
+   coefficients started from their inverse-dynamics least-squares estimate (from zero if that
+   fit does not converge).
    Evidence is ΔBIC = BIC(with) - BIC(without), BIC = N ln(RSS/N) + k ln N on the
    noise-normalised output error.  Per round the best hypothesis is accepted while ΔBIC <
    ``DELTA_BIC`` (−10: "very strong" on the Kass–Raftery scale) and it moves the fitted
