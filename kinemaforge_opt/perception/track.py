@@ -13,8 +13,8 @@ door, would let it slide) — a part at rest where it is static (a closed drawer
 few correspondences and keeps its guess, which the images then confirm — and then *verified*
 by the free-space tests of :mod:`change` against every depth image at s: the score is
 the share of the proposal's points consistent with the images minus the share the images saw
-through.  A candidate is acceptable when its points are mostly consistent.  Only when both
-candidates fail are principal-axes alignments onto the moving clusters at s tried
+through.  A candidate is acceptable when the points the images can judge are mostly consistent
+(:func:`acceptable`).  Only when both candidates fail are principal-axes alignments onto the moving clusters at s tried
 (re-detection; a symmetric part verifies flipped as well, so of the verified alignments the one
 turned least from the last solved pose is kept).  With no acceptable candidate the
 proposal is unobserved at s (NaN: occluded or out of view), and the next step starts from the
