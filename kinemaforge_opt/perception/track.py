@@ -13,10 +13,9 @@ door, would let it slide) — a part at rest where it is static (a closed drawer
 few correspondences and keeps its guess, which the images then confirm — and then *verified*
 by the free-space tests of :mod:`change` against every depth image at s: the score is
 the share of the proposal's points consistent with the images minus the share the images saw
-through.  A candidate is acceptable when the points the images can judge are mostly consistent
-(:func:`acceptable`).  Only when both candidates fail are principal-axes alignments onto the moving clusters at s tried
-(re-detection; a symmetric part verifies flipped as well, so of the verified alignments the one
-turned least from the last solved pose is kept).  With no acceptable candidate the
+through.  A candidate is acceptable when its points are mostly consistent.  Only when both
+candidates fail are principal-axes alignments onto the moving clusters at s tried
+(re-detection; they also fit a symmetric part flipped).  With no acceptable candidate the
 proposal is unobserved at s (NaN: occluded or out of view), and the next step starts from the
 last solved pose.
 
@@ -97,20 +96,6 @@ class Proposal:
         if not np.all(np.isfinite(T)):
             return None
         return self.points @ T[:3, :3].T + T[:3, 3]
-
-
-def _turn(A: np.ndarray, B: np.ndarray) -> float:
-    """Rotation angle [rad] between the rotations of two (4, 4) poses."""
-    return float(np.arccos(np.clip((np.trace(A[:3, :3].T @ B[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
-
-
-def acceptable(consistent: float, violated: float) -> bool:
-    """Whether a pose verifies: of the points the images can judge there (consistent or seen
-    through; a shut drawer's sides and floor are hidden in the body), at least MIN_VISIBLE_SHARE
-    of all, MIN_CONSISTENT_SHARE are consistent, and at most MAX_VIOLATED_SHARE of all points are
-    seen through."""
-    judged = consistent + violated
-    return judged >= MIN_VISIBLE_SHARE and consistent >= MIN_CONSISTENT_SHARE * judged and violated <= MAX_VIOLATED_SHARE
 
 
 def _principal_frame(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -245,8 +230,7 @@ class Tracker:
         if self.trees[s] is None or len(self.targets[s]) < 3:
             return None
         for cands, wide in [([g], False) for g in guesses] + [(guesses, True), (None, False)]:
-            redetect = cands is None
-            if redetect:
+            if cands is None:  # re-detection
                 cands = [T for cluster in self.moving_clusters(s) for T in pca_alignments(points, cluster)]
             best, best_score = None, -np.inf
             for T0 in cands:
@@ -255,11 +239,8 @@ class Tracker:
                 seen = self.verdicts(points @ T0[:3, :3].T + T0[:3, 3], s)[0] > 0
                 T = self._icp(points[seen] if seen.sum() >= MIN_VISIBLE_SHARE * len(points) else points, s, T0, wide)
                 cons, viol = self.verify(points @ T[:3, :3].T + T[:3, 3], s)
-                # a re-detected box-like part verifies as well flipped as upright: of the verified
-                # alignments the one turned least from the last solved pose is taken
-                score = -_turn(T, guesses[-1]) if redetect else cons - viol
-                if score > best_score and acceptable(cons, viol):
-                    best, best_score = T, score
+                if cons - viol > best_score and cons >= MIN_CONSISTENT_SHARE and viol <= MAX_VIOLATED_SHARE:
+                    best, best_score = T, cons - viol
             if best is not None:
                 return best
         return None
@@ -379,7 +360,7 @@ def refine(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
                 continue
             T = icp(sample, tracker.trees[s], tracker.targets[s], Ts[s], (fine,), tolerance=ICP_TOLERANCE_VOXELS * tracker.voxel)
             cons, viol = tracker.verify(sample @ T[:3, :3].T + T[:3, 3], s)
-            if acceptable(cons, viol):
+            if cons >= MIN_CONSISTENT_SHARE and viol <= MAX_VIOLATED_SHARE:
                 Ts[s] = T
         out.append(Proposal(p.name, p.ref, p.points, Ts))
     return out
@@ -424,86 +405,12 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
             new = tracker.track(f"p{len(proposals)}", int(r), rest[idx])
             k = _comoving(new, proposals, ICP_COARSE_VOXELS * tracker.voxel)
             if k is None:
-                k = _explained_by(tracker, new, proposals)
-            if k is None:
                 proposals.append(new)
             else:  # a disconnected piece of a tracked part (a drawer's floor behind its front)
                 p = proposals[k]
                 T = np.linalg.inv(p.Ts_delta[new.ref])
                 proposals[k] = Proposal(p.name, p.ref, np.concatenate([p.points, new.points @ T[:3, :3].T + T[:3, 3]]), p.Ts_delta)
-    return refine(tracker, resolve_overlaps(tracker, proposals)) if proposals else proposals
-
-
-def track_support(tracker: Tracker, x: np.ndarray, ref: int, Ts: np.ndarray) -> np.ndarray:
-    """(N,) evidence that (N, 3) world points [m] at step ``ref`` move with the track ``Ts``
-    (T, 4, 4; identity at ``ref``): over every other step it observes, (times the moved point
-    lands on an observed surface, within the fine ICP radius) − (times the cameras saw through
-    it).  A moved point hidden behind a surface counts neither way."""
-    fine = ICP_FINE_VOXELS * tracker.voxel
-    score = np.zeros(len(x), dtype=int)
-    for s in range(len(Ts)):
-        if s == ref or not np.all(np.isfinite(Ts[s])) or not len(tracker.clouds[s].points):
-            continue
-        xs = x @ Ts[s][:3, :3].T + Ts[s][:3, 3]
-        cons, viol = tracker.verdicts(xs, s)
-        hit = tracker.full_tree(s).query(xs, distance_upper_bound=fine)[0] < np.inf
-        score += (cons | viol) * (hit.astype(int) - viol)
-    return score
-
-
-def resolve_overlaps(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
-    """Points claimed by two proposals go to the track that explains them better.
-
-    Two parts side by side that move together at a proposal's reference step (two shut drawers,
-    or two open ones) are one cluster there, and its track follows one of them; the other part,
-    seeded at a step where it moves alone, is a second proposal whose points, carried to the first
-    one's reference step, cover part of it.  Each point of a proposal within the fine ICP radius
-    of another proposal's carried points is scored under both tracks (:func:`track_support`) and
-    leaves its proposal when the other track explains it better; a proposal left with fewer than
-    ``tracker.min_points`` points is dropped."""
-    fine = ICP_FINE_VOXELS * tracker.voxel
-    keep = [np.ones(len(p.points), dtype=bool) for p in proposals]
-    for i, p in enumerate(proposals):
-        for j, q in enumerate(proposals):
-            T_ref = q.Ts_delta[p.ref]
-            if i == j or not np.all(np.isfinite(T_ref)):
-                continue
-            near = cKDTree(q.points_at(p.ref)).query(p.points, distance_upper_bound=fine)[0] < np.inf
-            near &= keep[i]
-            if not near.any():
-                continue
-            back = np.linalg.inv(T_ref)
-            Ts_q = np.array([T @ back if np.all(np.isfinite(T)) else T for T in q.Ts_delta])  # q's motion from p.ref
-            x = p.points[near]
-            lose = track_support(tracker, x, p.ref, Ts_q) > track_support(tracker, x, p.ref, p.Ts_delta)
-            keep[i][np.flatnonzero(near)[lose]] = False
-    return [Proposal(p.name, p.ref, p.points[k], p.Ts_delta) for p, k in zip(proposals, keep)
-            if k.sum() >= tracker.min_points]
-
-
-def _explained_by(tracker: Tracker, new: Proposal, proposals: list[Proposal]) -> int | None:
-    """Index of the tracked proposal next to ``new`` (within the coarse ICP radius at ``new.ref``)
-    whose track explains ``new``'s points at least as well as their own track
-    (:func:`track_support`, summed over the points), or None.  A surface that slides along itself
-    (a drawer's side wall) gives ICP no hold along the motion, so its own track may stay put
-    while the part moves; the track of the part it belongs to explains it as well, or better."""
-    rng = np.random.default_rng(0)
-    x = new.points if len(new.points) <= MAX_TRACK_POINTS else new.points[rng.choice(len(new.points), MAX_TRACK_POINTS, replace=False)]
-    near_r = ICP_COARSE_VOXELS * tracker.voxel
-    own = None
-    best, best_score = None, -np.inf
-    for k, p in enumerate(proposals):
-        at = p.points_at(new.ref)
-        if at is None or not (cKDTree(at).query(x, distance_upper_bound=near_r)[0] < np.inf).any():
-            continue
-        if own is None:
-            own = int(track_support(tracker, x, new.ref, new.Ts_delta).sum())
-        back = np.linalg.inv(p.Ts_delta[new.ref])
-        Ts_p = np.array([T @ back if np.all(np.isfinite(T)) else T for T in p.Ts_delta])  # p's motion from new.ref
-        score = int(track_support(tracker, x, new.ref, Ts_p).sum())
-        if score >= own and score > best_score:
-            best, best_score = k, score
-    return best
+    return refine(tracker, proposals) if proposals else proposals
 
 
 def _comoving(new: Proposal, proposals: list[Proposal], tolerance: float) -> int | None:
