@@ -43,14 +43,14 @@ DEFAULT_DENSITY = 300.0
 def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
     """Per time step, (M_t,) part names of its fused points: a non-static point within the
     inlier distance of a tracked proposal takes the proposal's part (``part_of``: track name ->
-    part name; the nearest proposal wins); static points on a background plane are ENVIRONMENT;
-    the rest is BASE."""
+    part name; the nearest proposal wins); points on a background plane (within TEST_SIGMAS σ_z
+    of one reading at their range, at most the inlier distance) are ENVIRONMENT; the rest is BASE."""
     out = []
     for s, (c, st) in enumerate(zip(per.clouds, per.status)):
         labels = np.full(len(c.points), BASE, dtype=object)
-        # a point lies on a plane within the depth noise of one reading at its range (TEST_SIGMAS
-        # σ_z), at most the inlier distance: 1.5 voxels, 3.5 cm at 160x120, would take in a laptop
-        # lying on the floor
+        # the band follows the depth noise, not the voxel: 1.5 voxels is 3.5 cm at 160x120 and took
+        # in a laptop lying on the floor.  Range = distance to the nearest camera (≥ the depth, so
+        # the band errs wide).
         centres = np.array([v.frame.T_world_camera[:3, 3] for v in c.views])
         z = np.linalg.norm(c.points[:, None, :] - centres[None], axis=2).min(axis=1)
         band = np.minimum(per.inlier_distance, TEST_SIGMAS * per.noise.sigma(z))
