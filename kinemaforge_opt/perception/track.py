@@ -13,8 +13,8 @@ door, would let it slide) — a part at rest where it is static (a closed drawer
 few correspondences and keeps its guess, which the images then confirm — and then *verified*
 by the free-space tests of :mod:`change` against every depth image at s: the score is
 the share of the proposal's points consistent with the images minus the share the images saw
-through.  A candidate is acceptable when its points are mostly consistent.  Only when both
-candidates fail are principal-axes alignments onto the moving clusters at s tried
+through.  A candidate is acceptable when the points the images can judge are mostly consistent
+(:func:`acceptable`).  Only when both candidates fail are principal-axes alignments onto the moving clusters at s tried
 (re-detection; they also fit a symmetric part flipped).  With no acceptable candidate the
 proposal is unobserved at s (NaN: occluded or out of view), and the next step starts from the
 last solved pose.
@@ -69,7 +69,8 @@ MAX_VIOLATED_SHARE = 0.1
 # larger; smaller clusters of moving points are speckle or a part's fringe).
 MIN_PART_AREA = 0.01
 MIN_PROPOSAL_POINTS = 20
-# ICP uses only the points confirmed by the images at the guess when they are at least this share.
+# ICP uses only the points confirmed by the images at the guess when they are at least this share;
+# a pose is judged only when the images can judge at least this share of the points.
 MIN_VISIBLE_SHARE = 0.2
 # A new proposal joins a tracked one when it moves with it at this share of common steps.
 COMOVING_SHARE = 0.8
@@ -96,6 +97,15 @@ class Proposal:
         if not np.all(np.isfinite(T)):
             return None
         return self.points @ T[:3, :3].T + T[:3, 3]
+
+
+def acceptable(consistent: float, violated: float) -> bool:
+    """Whether a pose verifies, from the shares of a proposal's points consistent with the images
+    and only seen through there: of the points the images can judge (a shut drawer's sides and
+    floor are hidden in the body), at least MIN_VISIBLE_SHARE of all, MIN_CONSISTENT_SHARE are
+    consistent, and at most MAX_VIOLATED_SHARE of all points are seen through."""
+    judged = consistent + violated
+    return judged >= MIN_VISIBLE_SHARE and consistent >= MIN_CONSISTENT_SHARE * judged and violated <= MAX_VIOLATED_SHARE
 
 
 def _principal_frame(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -239,7 +249,7 @@ class Tracker:
                 seen = self.verdicts(points @ T0[:3, :3].T + T0[:3, 3], s)[0] > 0
                 T = self._icp(points[seen] if seen.sum() >= MIN_VISIBLE_SHARE * len(points) else points, s, T0, wide)
                 cons, viol = self.verify(points @ T[:3, :3].T + T[:3, 3], s)
-                if cons - viol > best_score and cons >= MIN_CONSISTENT_SHARE and viol <= MAX_VIOLATED_SHARE:
+                if cons - viol > best_score and acceptable(cons, viol):
                     best, best_score = T, cons - viol
             if best is not None:
                 return best
@@ -360,7 +370,7 @@ def refine(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
                 continue
             T = icp(sample, tracker.trees[s], tracker.targets[s], Ts[s], (fine,), tolerance=ICP_TOLERANCE_VOXELS * tracker.voxel)
             cons, viol = tracker.verify(sample @ T[:3, :3].T + T[:3, 3], s)
-            if cons >= MIN_CONSISTENT_SHARE and viol <= MAX_VIOLATED_SHARE:
+            if acceptable(cons, viol):
                 Ts[s] = T
         out.append(Proposal(p.name, p.ref, p.points, Ts))
     return out
