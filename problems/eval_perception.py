@@ -151,6 +151,15 @@ def score(per: Perception, graph: GraphResult, truth: Truth) -> dict:
     }
 
 
+def perceive_instance(root: str | Path, category: str, instance: int, **size) -> tuple[Perception, GraphResult, Truth]:
+    """Generate instance ``instance`` of ``category`` (``size``: views, frames, width, height as in
+    :func:`instance_case`) into ``root`` and return its perception, graph and ground truth."""
+    root = Path(root)
+    generate_case(instance_case(category, instance, **size), root)
+    per, graph, _, _ = run(root / "sequence")
+    return per, graph, ground_truth(root)
+
+
 def run(seq_root: str | Path) -> tuple[Perception, GraphResult, dict, dict]:
     """perceive + infer_tree on a sequence; returns them with wall and CPU seconds per stage."""
     seq = load_sequence(seq_root)

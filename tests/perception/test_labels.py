@@ -37,13 +37,10 @@ def test_static_depth_is_the_mean_of_the_static_readings():
 def fridge(tmp_path_factory):
     """A refrigerator (the deepest scene: the back wall ~3 m from the cameras, where one D435
     reading is noisier than the plane band) at 320×240, 2 views, 12 steps."""
-    from problems.eval_perception import ground_truth, instance_case, run
-    from kinemaforge_opt.synth import generate_case
+    from problems.eval_perception import perceive_instance
 
-    root = tmp_path_factory.mktemp("labels") / "fridge"
-    generate_case(instance_case("refrigerator", 0, views=2, frames=12, width=320, height=240), root)
-    per, graph, _, _ = run(root / "sequence")
-    return per, graph, ground_truth(root)
+    return perceive_instance(tmp_path_factory.mktemp("labels") / "fridge", "refrigerator", 0, views=2, frames=12,
+                             width=320, height=240)
 
 
 def test_environment_pixels_get_the_environment_label(fridge):

@@ -11,13 +11,10 @@ import pytest
 
 @pytest.fixture(scope="module")
 def microwave(tmp_path_factory):
-    from problems.eval_perception import ground_truth, instance_case, run
-    from kinemaforge_opt.synth import generate_case
+    from problems.eval_perception import perceive_instance
 
-    root = tmp_path_factory.mktemp("small") / "microwave"
-    generate_case(instance_case("microwave", 0, views=4, frames=12, width=160, height=120), root)
-    per, graph, _, _ = run(root / "sequence")
-    return per, graph, ground_truth(root)
+    return perceive_instance(tmp_path_factory.mktemp("small") / "microwave", "microwave", 0, views=4, frames=12,
+                             width=160, height=120)
 
 
 def test_door_does_not_grow_over_the_floor_at_160x120(microwave):
@@ -38,13 +35,10 @@ def test_door_does_not_grow_over_the_floor_at_160x120(microwave):
 
 @pytest.fixture(scope="module")
 def laptop(tmp_path_factory):
-    from problems.eval_perception import ground_truth, instance_case, run
-    from kinemaforge_opt.synth import generate_case
+    from problems.eval_perception import perceive_instance
 
-    root = tmp_path_factory.mktemp("small") / "laptop"
-    generate_case(instance_case("laptop", 1, views=4, frames=12, width=160, height=120), root)
-    per, graph, _, _ = run(root / "sequence")
-    return per, graph, ground_truth(root)
+    return perceive_instance(tmp_path_factory.mktemp("small") / "laptop", "laptop", 1, views=4, frames=12,
+                             width=160, height=120)
 
 
 def test_laptop_base_on_the_floor_is_not_environment_at_160x120(laptop):
