@@ -95,7 +95,7 @@ def score(per: Perception, graph: GraphResult, truth: Truth) -> dict:
     link, pixels on the environment (true or predicted) left out.  axis_error_deg: the graph's
     closed-form axis vs the true one; origin_error_m: distance between the joint lines (revolute
     and helical; NaN for prismatic)."""
-    counts, preds, _ = _confusion(per, graph, truth)
+    counts, preds, trues = _confusion(per, graph, truth)
     tree = graph.best
     true_children = {j.child for j in truth.joints}
     root = next(iter({j.parent for j in truth.joints}), None)
@@ -132,10 +132,8 @@ def score(per: Perception, graph: GraphResult, truth: Truth) -> dict:
     for c in sorted(true_children):
         parts = [p for p, t in match.items() if t == c]
         ious[c] = max((_iou(counts, p, c) for p in parts), default=0.0)
-    preds_all = sorted({a for a, _ in counts})
-    trues_all = sorted({b for _, b in counts})
-    C = np.array([[counts.get((a, b), 0) for b in trues_all] for a in preds_all], dtype=np.int64)
-    bench = part_iou_from_counts(C, preds_all, trues_all, pred_ignore=(ENVIRONMENT,), true_ignore=("nothing", "environment"))
+    C = np.array([[counts.get((a, b), 0) for b in trues] for a in preds], dtype=np.int64)
+    bench = part_iou_from_counts(C, preds, trues, pred_ignore=(ENVIRONMENT,), true_ignore=("nothing", "environment"))
     env_true = ("environment", "nothing")
     iou_base = _iou(counts, BASE, root, ignore_true=env_true, ignore_pred=(ENVIRONMENT,)) if root else np.nan
     return {

@@ -9,12 +9,17 @@ from __future__ import annotations
 import pytest
 
 
-@pytest.fixture(scope="module")
-def microwave(tmp_path_factory):
+def _small(tmp_path_factory, category: str, instance: int):
+    """(perception, graph, truth) of one instance at 160×120, 4 views, 12 steps."""
     from problems.eval_perception import perceive_instance
 
-    return perceive_instance(tmp_path_factory.mktemp("small") / "microwave", "microwave", 0, views=4, frames=12,
+    return perceive_instance(tmp_path_factory.mktemp("small") / category, category, instance, views=4, frames=12,
                              width=160, height=120)
+
+
+@pytest.fixture(scope="module")
+def microwave(tmp_path_factory):
+    return _small(tmp_path_factory, "microwave", 0)
 
 
 def test_door_does_not_grow_over_the_floor_at_160x120(microwave):
@@ -35,10 +40,7 @@ def test_door_does_not_grow_over_the_floor_at_160x120(microwave):
 
 @pytest.fixture(scope="module")
 def laptop(tmp_path_factory):
-    from problems.eval_perception import perceive_instance
-
-    return perceive_instance(tmp_path_factory.mktemp("small") / "laptop", "laptop", 1, views=4, frames=12,
-                             width=160, height=120)
+    return _small(tmp_path_factory, "laptop", 1)
 
 
 def test_laptop_base_on_the_floor_is_not_environment_at_160x120(laptop):
