@@ -59,6 +59,8 @@ class JointHypothesis:
     fit's consistency with the noise level); 1.0 until scored.
     rotation_rms: RMS rotation residual [rad] and rotation_sigma: the pair's estimated rotation
     noise per coordinate [rad] (both 0 for position-only tracks).
+    times: (N,) the common samples' times [s]; position_residuals: (N, 3) the position residual
+    per sample in the parent frame [m] (compares two fits of one child sample by sample).
     """
 
     type: str
@@ -80,6 +82,8 @@ class JointHypothesis:
     confidence: float = 1.0
     rotation_rms: float = 0.0
     rotation_sigma: float = 0.0
+    times: np.ndarray | None = None
+    position_residuals: np.ndarray | None = None
 
 
 def _tangent_basis(a: np.ndarray) -> np.ndarray:
@@ -179,6 +183,7 @@ def _finish(kind, motion, axis_p, origin_p, pitch, radius, q, r_norm, pos_res, n
     return JointHypothesis(
         kind, axis_w, origin_w, axis_p, origin_p, float(pitch), radius, np.asarray(q, float), rms,
         autocorr, motion.sigma_position, chi2, int(n_params), n_latent, n, float(bic),
+        times=motion.times, position_residuals=e,
     )
 
 

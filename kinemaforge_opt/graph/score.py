@@ -27,6 +27,8 @@ import numpy as np
 from scipy.special import logsumexp
 
 from .fit import SIGNIFICANCE, JointHypothesis
+from .motion import MIN_SAMPLES, SIGMA_FLOOR
+
 # Which simpler models each richer model must clearly beat to be identifiable.
 SIMPLER = {"rigid": (), "prismatic": ("rigid",), "revolute": ("rigid", "prismatic"), "helical": ("revolute", "prismatic")}
 
@@ -78,3 +80,36 @@ def log_posterior(bic: dict) -> dict:
     keys = list(bic)
     v = -0.5 * np.array([bic[k] for k in keys])
     return dict(zip(keys, v - logsumexp(v)))
+
+
+def closeness_z(a: JointHypothesis, b: JointHypothesis) -> float:
+    """Vuong's closeness statistic for two non-nested fits of one child's positions (e.g. the
+    child seen from two candidate parents) on their common samples: z > 0 favours ``a``; z is
+    ≈ N(0, 1) when both explain the data equally well.  NaN when they share fewer than
+    MIN_SAMPLES samples.
+
+    Per-sample Gaussian log-likelihood of the 3-D position residual, each fit at its own ML
+    variance; the log-likelihood ratio less the BIC parameter correction, over its standard
+    error √(N·var(d)/s), s the effective sample fraction of the per-sample differences d (lag-1
+    autocorrelation, as in :func:`effective_fraction`)."""
+    t, ia, ib = np.intersect1d(a.times, b.times, return_indices=True)
+    n = t.size
+    if n < MIN_SAMPLES:
+        return float("nan")
+
+    def loglik(h, idx):
+        e2 = np.sum(h.position_residuals[idx] ** 2, axis=1)
+        v = max(float(np.mean(e2)) / 3.0, SIGMA_FLOOR**2)
+        return -1.5 * np.log(v) - e2 / (2.0 * v)
+
+    d = loglik(a, ia) - loglik(b, ib)
+    dc = d - d.mean()
+    ss = float(np.sum(dc * dc))
+    rho1 = float(np.clip(np.sum(dc[1:] * dc[:-1]) / ss, 0.0, 1.0 - 1.0 / n)) if ss > 0 else 0.0
+    s = max((1.0 - rho1) / (1.0 + rho1), 1.0 / n)
+    ka, kb = (h.n_params + (s * n if h.n_latent else 0.0) for h in (a, b))
+    lr = float(np.sum(d)) - 0.5 * (ka - kb) * np.log(n)
+    se = np.sqrt(ss / s)  # √(N · var(d) / s)
+    if se == 0.0:
+        return 0.0 if lr == 0.0 else float(np.sign(lr) * np.inf)
+    return lr / se

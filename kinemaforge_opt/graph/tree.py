@@ -21,22 +21,25 @@ least-moving first, each to the already placed group that explains it best.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from itertools import islice
 
 import networkx as nx
 import numpy as np
 from networkx.algorithms.tree.branchings import ArborescenceIterator
+from scipy.stats import norm
 from threadpoolctl import threadpool_limits
 
 from ..errors import DataError
 from ..io.tracks import PoseTracks
 from .fit import JointHypothesis, fit_all
 from .motion import MIN_SAMPLES, WORLD, relative_motion
-from .score import SIGNIFICANCE, log_posterior, score_pair
+from .score import SIGNIFICANCE, closeness_z, log_posterior, score_pair
 
 # A pair is merged into one rigid part when the rigid type is at least this probable (a 95 %
 # decision level on the type posterior, not a data-tuned value).
 MERGE_PROBABILITY = 0.95
+# Two candidate parents explain a child equally well when Vuong's closeness test cannot tell
+# them apart at the same 95 % level (two-sided): |z| within this (see :func:`_shallowest`).
+CLOSENESS_Z = float(norm.ppf(0.5 + MERGE_PROBABILITY / 2.0))
 
 
 @dataclass(frozen=True, eq=False)
@@ -238,15 +241,54 @@ def _tree(root, parts, edges, arcs) -> KinematicTree:
     return KinematicTree(root, parts, joints, rigid_score + sum(_log(j.hypothesis.confidence) for j in joints))
 
 
+def _shallowest(root, edges, arcs) -> list[tuple[str, str]]:
+    """Occam's rule on the arborescence's arcs: a child hangs from the ancestor of its parent
+    nearest the root that explains its motion as well as the parent does: Vuong's closeness
+    test tells the two fits apart by no more than CLOSENESS_Z (either way).
+
+    Two doors on one hinge line move about the same axis relative to the base and relative to
+    each other; the chain through the other door fits within the noise just as well, but is the
+    longer explanation (it needs that door's joint to be right too).  Re-hanging a child on an
+    ancestor of its parent cannot close a cycle; parents are settled top-down."""
+    parent = {b: a for a, b in arcs}
+    children: dict[str, list[str]] = {}
+    for a, b in arcs:
+        children.setdefault(a, []).append(b)
+    queue = [root]
+    while queue:
+        node = queue.pop(0)
+        for c in sorted(children.get(node, [])):
+            queue.append(c)
+            chain = [parent[c]]
+            while chain[-1] != root:
+                chain.append(parent[chain[-1]])
+            held = _best_type(edges[(parent[c], c)])
+            for anc in reversed(chain[1:]):  # root first
+                if (anc, c) not in edges:
+                    continue
+                alt = _best_type(edges[(anc, c)])
+                if alt.confidence > 0 and abs(closeness_z(held, alt)) <= CLOSENESS_Z:
+                    parent[c] = anc
+                    break
+    return [(parent[b], b) for _, b in arcs]
+
+
 def _graph_trees(parts, edges, k_best: int) -> list[KinematicTree]:
+    """The k best distinct trees: arborescences in decreasing Σ log ρ, each re-hung by
+    :func:`_shallowest` (several arborescences may re-hang to one tree: counted once)."""
     G = nx.DiGraph()
     G.add_nodes_from(parts)
     for (a, b), hyps in edges.items():
         G.add_edge(a, b, weight=_log(_best_type(hyps).confidence))
     excluded = [(a, "base") for a in G.predecessors("base")]
-    trees = []
-    for A in islice(ArborescenceIterator(G, weight="weight", minimum=False, init_partition=([], excluded)), k_best):
-        trees.append(_tree("base", parts, edges, list(A.edges)))
+    trees, seen = [], set()
+    for A in ArborescenceIterator(G, weight="weight", minimum=False, init_partition=([], excluded)):
+        arcs = _shallowest("base", edges, list(A.edges))
+        if frozenset(arcs) not in seen:
+            seen.add(frozenset(arcs))
+            trees.append(_tree("base", parts, edges, arcs))
+            if len(trees) == k_best:
+                break
     return trees
 
 
