@@ -405,7 +405,8 @@ def fit_all(motion: RelativeMotion) -> dict[str, JointHypothesis]:
     alone: when the better of the revolute and helical fits that must explain both misfits the
     positions by more than SIGNIFICANCE times the revolute fit of the positions alone (both floored
     at the white-noise level), the rotations follow no screw motion the positions allow (see
-    :func:`rotations_contradict`)."""
+    :func:`rotations_contradict`); their orientations then count modulo π flips (see
+    :func:`_flip_scored`)."""
     hyps = {kind: fit_relation(kind, motion) for kind in JOINT_TYPES}
     screw = min(hyps["revolute"], hyps["helical"], key=lambda h: h.residual_rms)
     if motion.Rs is None or screw.residual_rms <= SIGNIFICANCE * np.sqrt(3.0) * motion.sigma_position:
@@ -414,7 +415,8 @@ def fit_all(motion: RelativeMotion) -> dict[str, JointHypothesis]:
     revolute = _fit_points("revolute", points)
     if not rotations_contradict(screw, revolute):
         return hyps
-    return {kind: revolute if kind == "revolute" else _fit_points(kind, points) for kind in JOINT_TYPES}
+    return {kind: _flip_scored(revolute if kind == "revolute" else _fit_points(kind, points), motion)
+            for kind in JOINT_TYPES}
 
 
 def rotations_contradict(full: JointHypothesis, points: JointHypothesis) -> bool:
@@ -428,3 +430,34 @@ def rotations_contradict(full: JointHypothesis, points: JointHypothesis) -> bool
     position-only fit does not: the orientations are set aside for this pair."""
     floor = np.sqrt(3.0) * full.noise_sigma
     return max(full.residual_rms, floor) > SIGNIFICANCE * max(points.residual_rms, floor)
+
+
+
+def flip_angles(Rs: np.ndarray) -> np.ndarray:
+    """(N,) angles [rad] of (N, 3, 3) rotations from their most central one modulo π flips: the
+    angle δ of R_refᵀ R_t counts as min(δ, π − δ); the reference is the sample with the least
+    median such angle to all others."""
+    cos = (np.einsum("rji,tji->rt", Rs, Rs) - 1.0) / 2.0  # cos of the angle of R_rᵀ R_t
+    d = np.arccos(np.clip(cos, -1.0, 1.0))
+    d = np.minimum(d, np.pi - d)
+    return d[int(np.argmin(np.median(d, axis=1)))]
+
+
+def _flip_scored(h: JointHypothesis, motion: RelativeMotion) -> JointHypothesis:
+    """A position-only fit ``h`` of full-pose ``motion`` with the orientations scored modulo π
+    flips: what the relation leaves of them — Rot(axis, q_t)ᵀ R_t for a hinge or screw, R_t for
+    rigid and prismatic — must stay put up to a flip (:func:`flip_angles`).  Their χ² (each
+    angle spread over its three coordinates) joins the positions', so the information criterion
+    weighs both.
+
+    A flat door registered flipped by π on some frames still turns with its hinge between flips.
+    A drawer fragment does not turn: its centroid may trace a slight arc (or jump when the
+    registration slips to another face), and a hinge through those positions claims a rotation
+    the orientations do not show."""
+    Rs = motion.Rs
+    if h.type in ("revolute", "helical"):
+        Rs = np.einsum("nji,njk->nik", _rot(h.q[:, None] * h.axis_parent[None, :]), Rs)
+    d, sr = flip_angles(Rs), motion.sigma_rotation
+    chi2 = h.chi2 + 3.0 * _robust_chi2(d / (np.sqrt(3.0) * sr))
+    return dataclasses.replace(h, chi2=chi2, bic=chi2 + (h.n_params + h.n_latent) * np.log(h.n_samples),
+                               rotation_rms=float(np.sqrt(np.mean(d**2))), rotation_sigma=float(sr))
