@@ -6,7 +6,8 @@
 (model.urdf + recording.csv per folder, noise re-drawn when cases repeat), ~2 s per item.
 ``--job reconstruct``: the quick benchmark's RGB-D sequences (seed-protocol objects, 4 views,
 12 steps, 160×120, generated once into the benchmark cache), reconstruction + Drake
-verification, ~10–20 s per item — the batch's main use, many sequences.
+verification, ~4–10 s per item — the batch's main use, many sequences; with ``--size full``
+the full benchmark's sequences instead (8 views × 20 steps at 640×480, ~1 min per item).
 
 Prints wall time per worker count (Ray start-up and shutdown included), the span from the first
 item's start to the last one's end, and both speed-ups (throughput = items per second)."""
@@ -44,13 +45,15 @@ def diagnose_inputs(n: int, root: Path) -> list[Path]:
     return inputs
 
 
-def reconstruct_inputs(n: int, root: Path) -> list[Path]:
-    """``n`` RGB-D sequence folders: the quick benchmark's protocol cases (categories in turn,
-    then instances, then repetition seeds), linked under ``root`` with distinct names."""
-    from kinemaforge_opt.bench.reconstruction import CATEGORIES, RECO_QUICK, cached_case
+def reconstruct_inputs(n: int, root: Path, full: bool = False) -> list[Path]:
+    """``n`` RGB-D sequence folders: the quick (or ``full``) benchmark's protocol cases
+    (categories in turn, then instances, then repetition seeds), linked under ``root`` with
+    distinct names."""
+    from kinemaforge_opt.bench.reconstruction import CATEGORIES, RECO_FULL, RECO_QUICK, cached_case
     from problems.reco_sizes import protocol_case
 
-    size = dict(views=RECO_QUICK.views, frames=RECO_QUICK.frames, width=RECO_QUICK.width, height=RECO_QUICK.height)
+    reco = RECO_FULL if full else RECO_QUICK
+    size = dict(views=reco.views, frames=reco.frames, width=reco.width, height=reco.height)
     root.mkdir(parents=True, exist_ok=True)
     inputs = []
     for k in range(n):
@@ -68,10 +71,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--job", choices=("diagnose", "reconstruct"), default="diagnose")
     ap.add_argument("-n", type=int, default=16, help="number of inputs (default 16; cases repeat with new noise / seeds)")
+    ap.add_argument("--size", choices=("quick", "full"), default="quick",
+                    help="reconstruct job: the quick or the full benchmark's sequences (default quick)")
     ap.add_argument("-o", "--out", type=Path, default=Path("/tmp/time_batch"))
     args = ap.parse_args()
-    make_inputs = diagnose_inputs if args.job == "diagnose" else reconstruct_inputs
-    inputs = make_inputs(args.n, args.out / f"inputs-{args.job}")
+    if args.job == "diagnose":
+        inputs = diagnose_inputs(args.n, args.out / "inputs-diagnose")
+    else:
+        inputs = reconstruct_inputs(args.n, args.out / f"inputs-reconstruct-{args.size}", full=args.size == "full")
     wall, span = {}, {}
     for workers in (1, 2):
         out = args.out / f"{args.job}-workers{workers}"

@@ -6,6 +6,10 @@ missed effects, the relative value error of each true positive, and the held-out
 prediction before (nominal model) and after (augmented with what the method found).  A concealed
 ``limit_contact`` whose stop the motion never reached is not in the truth set (nothing in the
 data shows it); no method has a limit-contact hypothesis, so a reached stop counts as missed.
+Each effect case also gets its oracle ΔBIC (:mod:`.detectability`): whether even the true
+effects, fitted from their true values, explain the recording better than the nominal model by
+``diagnose``'s selection margin; the summary adds the F1 over the null cases and the effect
+cases that pass it.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..physics.diagnose import STATE_WINDOW_S
+from ..physics.diagnose import DELTA_BIC, STATE_WINDOW_S
 from .baselines import BaselineResult, idls, sindy, split
 from .predict import augmented, predict
 from .recordings import effect_recording
@@ -43,6 +47,12 @@ class CaseScore:
     time_s: float
     equivalent: dict[str, tuple[str, ...]] = None  # found type -> types reported as explaining the data as well
     class_scores: tuple[int, int, int] = None  # (TP, FP, missed) crediting equivalent explanations
+    oracle_delta_bic: float | None = None  # the true effects' ΔBIC on the recording (None: null case or failed fit)
+
+    @property
+    def supported(self) -> bool:
+        """A null case, or one whose true effects the recording supports (oracle ΔBIC below DELTA_BIC)."""
+        return not self.truth or (self.oracle_delta_bic is not None and self.oracle_delta_bic < DELTA_BIC)
 
 
 def _score(case: str, method: str, truth: dict[str, float], found: dict[str, float],
@@ -78,7 +88,10 @@ def _baseline_after(model, held, res: BaselineResult) -> float:
 
 def run_case(case: str, noise_seed: int = 0) -> list[CaseScore]:
     """Score the three methods on catalogue case ``case`` with encoder-noise seed ``noise_seed``."""
+    from dataclasses import replace
+
     from ..physics.diagnose import diagnose
+    from .detectability import oracle_delta_bic
 
     er = effect_recording(case, noise_seed)
     truth = {e.type: e.value for e in er.effects if e.type != "limit_contact" or er.stop_reached}
@@ -98,13 +111,20 @@ def run_case(case: str, noise_seed: int = 0) -> list[CaseScore]:
             after = _baseline_after(er.model, held, res) if held is not None else None
             out.append(_score(case, res.method, truth, {e.type: e.value for e in res.effects},
                               (rms_before, after), res.time_s))
-    return out
+    oracle = oracle_delta_bic(er)
+    return [replace(s, oracle_delta_bic=oracle) for s in out]
 
 
 def summarise(scores: list[CaseScore]) -> dict[str, dict]:
     """Per method: effect-type precision, recall and F1 (micro over cases), F1 crediting reported
-    equivalent explanations (``f1_equivalence_classes``), false positives on null cases, median
+    equivalent explanations (``f1_equivalence_classes``), both again over the cases the
+    recording supports (``f1_supported``, ``f1_supported_equivalence_classes``, over
+    ``supported_cases``: see :attr:`CaseScore.supported`), false positives on null cases, median
     relative value error, median held-out RMS improvement (before / after)."""
+
+    def f1(tp: int, fp: int, fn: int) -> float | None:
+        return 2 * tp / (2 * tp + fp + fn) if tp + fp + fn else None
+
     out = {}
     for m in METHODS:
         s = [x for x in scores if x.method == m]
@@ -114,12 +134,18 @@ def summarise(scores: list[CaseScore]) -> dict[str, dict]:
         errs = [e for x in s for e in x.value_error.values()]
         gains = [x.rms_before / x.rms_after for x in s if x.rms_before and x.rms_after and x.truth]
         ctp, cfp, cfn = (sum(x.class_scores[i] for x in s if x.class_scores) for i in range(3))
+        sup = [x for x in s if x.supported]
+        stp, sfp, sfn = (sum(getattr(x, k) for x in sup) for k in ("true_positives", "false_positives", "missed"))
+        sctp, scfp, scfn = (sum(x.class_scores[i] for x in sup if x.class_scores) for i in range(3))
         out[m] = {
             "cases": len(s),
-            "f1_equivalence_classes": 2 * ctp / (2 * ctp + cfp + cfn) if ctp + cfp + cfn else None,
+            "f1_equivalence_classes": f1(ctp, cfp, cfn),
             "precision": tp / (tp + fp) if tp + fp else None,
             "recall": tp / (tp + fn) if tp + fn else None,
-            "f1": 2 * tp / (2 * tp + fp + fn) if tp + fp + fn else None,
+            "f1": f1(tp, fp, fn),
+            "supported_cases": len(sup),
+            "f1_supported": f1(stp, sfp, sfn),
+            "f1_supported_equivalence_classes": f1(sctp, scfp, scfn),
             "null_false_positives": sum(x.false_positives for x in s if not x.truth),
             "median_value_error": float(np.median(errs)) if errs else None,
             "median_heldout_gain": float(np.median(gains)) if gains else None,
@@ -129,4 +155,4 @@ def summarise(scores: list[CaseScore]) -> dict[str, dict]:
 
 
 def as_dicts(scores: list[CaseScore]) -> list[dict]:
-    return [asdict(s) for s in scores]
+    return [{**asdict(s), "supported": s.supported} for s in scores]

@@ -54,6 +54,20 @@ def test_summary_scores():
     assert s["diagnose"]["median_heldout_gain"] == 10.0
 
 
+def test_supported_cases_leave_out_only_effects_the_recording_does_not_show():
+    # one effect the recording supports (found), one it does not (missed), one null case
+    scores = [
+        CaseScore("effect_door_spring", "diagnose", ("spring",), ("spring",), 1, 0, 0, {}, 0.04, 0.004, 1.0,
+                  oracle_delta_bic=-600.0),
+        CaseScore("effect_door_stribeck_friction", "diagnose", ("stribeck_friction",), (), 0, 0, 1, {}, 0.01, 0.01, 1.0,
+                  oracle_delta_bic=7.0),
+        CaseScore("null_door", "diagnose", (), (), 0, 0, 0, {}, 0.01, 0.01, 1.0),
+    ]
+    s = summarise(scores)["diagnose"]
+    assert s["f1"] == 2 / 3 and s["supported_cases"] == 2 and s["f1_supported"] == 1.0
+    assert [c["supported"] for c in as_dicts(scores)] == [True, False, True]
+
+
 def test_write_report(tmp_path):
     paths = write_report(_result(), tmp_path)
     md = paths["markdown"].read_text()
