@@ -401,46 +401,81 @@ def fit_relation(kind: str, motion: RelativeMotion) -> JointHypothesis:
 def fit_all(motion: RelativeMotion) -> dict[str, JointHypothesis]:
     """Every relation type fitted to ``motion``, keyed by type.
 
-    Full-pose motions whose orientations contradict their positions are fitted on the positions
-    alone: when the better of the revolute and helical fits that must explain both misfits the
-    positions by more than SIGNIFICANCE times the revolute fit of the positions alone (both floored
-    at the white-noise level), the rotations follow no screw motion the positions allow (see
-    :func:`rotations_contradict`); their orientations then count modulo π flips (see
-    :func:`_flip_scored`)."""
+    Full-pose motions whose orientations contradict their positions are fitted on the positions,
+    the orientations counting modulo one π flip (see :func:`_flip_scored`): when the better of
+    the revolute and helical fits that must explain both clearly misfits what the hinge through
+    the positions explains (see :func:`rotations_contradict`)."""
     hyps = {kind: fit_relation(kind, motion) for kind in JOINT_TYPES}
+    if motion.Rs is None:
+        return hyps
     screw = min(hyps["revolute"], hyps["helical"], key=lambda h: h.residual_rms)
-    if motion.Rs is None or screw.residual_rms <= SIGNIFICANCE * np.sqrt(3.0) * motion.sigma_position:
-        return hyps  # positions fitted to the noise level: no contradiction possible
+    if (screw.residual_rms <= SIGNIFICANCE * np.sqrt(3.0) * motion.sigma_position
+            and screw.rotation_rms <= SIGNIFICANCE * np.sqrt(3.0) * motion.sigma_rotation):
+        return hyps  # poses fitted to the noise level: no contradiction possible
     points = dataclasses.replace(motion, Rs=None, sigma_rotation=0.0)
-    revolute = _fit_points("revolute", points)
+    revolute = _flip_scored(_fit_points("revolute", points), motion)
     if not rotations_contradict(screw, revolute):
         return hyps
-    return {kind: _flip_scored(revolute if kind == "revolute" else _fit_points(kind, points), motion)
+    return {kind: revolute if kind == "revolute" else _flip_scored(_fit_points(kind, points), motion)
             for kind in JOINT_TYPES}
 
 
 def rotations_contradict(full: JointHypothesis, points: JointHypothesis) -> bool:
-    """True when the full-pose screw fit ``full`` misfits the positions by more than SIGNIFICANCE
-    times the position-only hinge fit ``points`` (RMS floored at √3·σ).
+    """True when the full-pose screw fit ``full`` misfits by more than SIGNIFICANCE times the
+    position-only hinge fit ``points`` (scored by :func:`_flip_scored`) the positions or the
+    orientations — these modulo a π flip for ``points`` (RMS floored at √3·σ).
 
     A registration of a part with a symmetric shape (a flat door, a drawer front) may come out
     turned by the symmetry (π about the panel's normal) on some frames: the orientation jumps,
     the position — the centroid of the registered points, which the symmetry maps onto itself —
-    does not.  A hinge that explains such orientations then misses the positions (a π swing), the
-    position-only fit does not: the orientations are set aside for this pair."""
+    does not.  A hinge that explains such orientations misses the positions (a π swing); one
+    that explains the positions misses the orientations; the position-only fit, up to the flip,
+    does neither."""
     floor = np.sqrt(3.0) * full.noise_sigma
-    return max(full.residual_rms, floor) > SIGNIFICANCE * max(points.residual_rms, floor)
+    floor_r = np.sqrt(3.0) * full.rotation_sigma
+    return (max(full.residual_rms, floor) > SIGNIFICANCE * max(points.residual_rms, floor)
+            or max(full.rotation_rms, floor_r) > SIGNIFICANCE * max(points.rotation_rms, floor_r))
 
+
+def _half_turn_axis(A: np.ndarray) -> np.ndarray:
+    """(K, 3) axes of the half-turns nearest (K, 3, 3) rotations (a half-turn about n is
+    2nnᵀ − I: the top eigenvector of the symmetric part)."""
+    return np.linalg.eigh((A + np.swapaxes(A, 1, 2)) / 2.0)[1][:, :, -1]
+
+
+def _top_axis(n: np.ndarray) -> np.ndarray:
+    """The unit axis (3,) closest to (K, 3) sign-free unit axes (top eigenvector of Σ nnᵀ)."""
+    return np.linalg.eigh(n.T @ n)[1][:, -1]
 
 
 def flip_angles(Rs: np.ndarray) -> np.ndarray:
-    """(N,) angles [rad] of (N, 3, 3) rotations from their most central one modulo π flips: the
-    angle δ of R_refᵀ R_t counts as min(δ, π − δ); the reference is the sample with the least
-    median such angle to all others."""
+    """(N,) angles [rad] of (N, 3, 3) rotations from a central one, R_ref, modulo the symmetry
+    of a box: the half-turns about three perpendicular body axes b1, b2, b3 (which registration
+    cannot tell apart on a panel or a drawer front).  Sample t counts the least angle of
+    gᵀ R_refᵀ R_t over g ∈ {I, half-turns about b1, b2, b3}.
+
+    R_ref is the sample with the least median angle to the others, each angle δ taken as
+    min(δ, π − δ).  b1 is the axis nearest the half-turn axes of the samples more than π/2 from
+    R_ref (none: no flip), b2 that of the rest of them (axes more than 45° from b1) projected
+    off b1, b3 = b1 × b2.  Fixed axes, not any half-turn: a half-turn composed with a turn about
+    a perpendicular axis is again a half-turn."""
     cos = (np.einsum("rji,tji->rt", Rs, Rs) - 1.0) / 2.0  # cos of the angle of R_rᵀ R_t
     d = np.arccos(np.clip(cos, -1.0, 1.0))
-    d = np.minimum(d, np.pi - d)
-    return d[int(np.argmin(np.median(d, axis=1)))]
+    ref = int(np.argmin(np.median(np.minimum(d, np.pi - d), axis=1)))
+    A = np.einsum("ji,njk->nik", Rs[ref], Rs)
+    far = d[ref] > np.pi / 2
+    if not far.any():
+        return d[ref]
+    n = _half_turn_axis(A[far])
+    b1 = _top_axis(n)
+    rest = n[np.abs(n @ b1) < np.cos(np.pi / 4)]
+    b2 = _top_axis(rest - np.outer(rest @ b1, b1)) if len(rest) else _tangent_basis(b1)[:, 0]
+    b2 = normalize(b2 - b1 * (b2 @ b1))
+    out = d[ref]
+    for b in (b1, b2, np.cross(b1, b2)):
+        g = 2.0 * np.outer(b, b) - np.eye(3)
+        out = np.minimum(out, np.arccos(np.clip((np.einsum("ij,nij->n", g, A) - 1.0) / 2.0, -1.0, 1.0)))
+    return out
 
 
 def _flip_scored(h: JointHypothesis, motion: RelativeMotion) -> JointHypothesis:

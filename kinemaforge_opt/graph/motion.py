@@ -2,7 +2,10 @@
 
 The noise level is estimated from the data alone, independently of any joint model: a local
 quadratic (Savitzky–Golay) smoother removes the smooth motion, and the robust spread (MAD) of
-what is left, corrected for the smoother's own variance, is the sensor noise σ.
+what is left, corrected for the smoother's own variance, is the sensor noise σ.  Orientations
+enter as their frame-to-frame increments summed up (:func:`rotation_signal`): a continuous
+signal, where an orientation registered flipped by π is one step per flip, not a run of frames
+near π where the rotation vector's axis — and its noise — is ill-defined.
 """
 
 from __future__ import annotations
@@ -93,8 +96,16 @@ def relative_motion(tracks: PoseTracks, parent: int | None, child: int) -> Relat
     sigma_r = SIGMA_FLOOR
     if Rs is not None:
         Rs = _project_so3(Rs)
-        sigma_r = noise_sigma(Rotation.from_matrix(np.einsum("ji,njk->nik", Rs[0], Rs)).as_rotvec())
+        sigma_r = noise_sigma(rotation_signal(Rs))
     return RelativeMotion(tracks.times[both], pos, Rs, noise_sigma(pos), sigma_r, T0)
+
+
+def rotation_signal(Rs: np.ndarray) -> np.ndarray:
+    """(N, 3) running sum of the rotation vectors of the increments R_tᵀ R_{t+1} [rad] of
+    (N, 3, 3) orientations, 0 at the first sample (equals the rotation vector of R_0ᵀ R_t for a
+    rotation about a fixed axis; its noise is the orientations' noise)."""
+    inc = Rotation.from_matrix(np.einsum("nji,njk->nik", Rs[:-1], Rs[1:])).as_rotvec()
+    return np.vstack([np.zeros((1, 3)), np.cumsum(inc, axis=0)])
 
 
 def _project_so3(Rs: np.ndarray) -> np.ndarray:
