@@ -6,7 +6,8 @@ only one for position-only tracks) followed by a robust refinement (scipy ``leas
 soft-L1 loss on residuals normalised by the estimated noise σ, so the loss switches to linear
 beyond ~1σ).  Latent joint values (one per sample) are refined jointly with a sparse Jacobian.
 A full-pose pair whose orientations contradict its positions (no screw fits both; see
-:func:`fit_all`) is fitted on its positions alone.
+:func:`fit_all`) is fitted on its positions, its orientations counted modulo a box's half-turn
+symmetry (a registration flip).
 
 Scoring (Sturm et al., JAIR 2011): BIC = χ² + k ln N with χ² the robust sum of normalised
 squared residuals, k the model's parameters *including* its N latent joint values (so pure
@@ -57,8 +58,9 @@ class JointHypothesis:
     the graph rescores it for correlated residuals (see ``graph.score``).
     confidence: ρ ∈ [0, 1], set by the graph (probability of this type for the pair times the
     fit's consistency with the noise level); 1.0 until scored.
-    rotation_rms: RMS rotation residual [rad] and rotation_sigma: the pair's estimated rotation
-    noise per coordinate [rad] (both 0 for position-only tracks).
+    rotation_rms: RMS rotation residual [rad] — modulo a registration flip for a full-pose pair
+    fitted on its positions (see :func:`fit_all`) — and rotation_sigma: the pair's estimated
+    rotation noise per coordinate [rad] (both 0 for position-only tracks).
     times: (N,) the common samples' times [s]; position_residuals: (N, 3) the position residual
     per sample in the parent frame [m] (compares two fits of one child sample by sample).
     """

@@ -86,12 +86,14 @@ def closeness_z(a: JointHypothesis, b: JointHypothesis) -> float:
     """Vuong's closeness statistic for two non-nested fits of one child's positions (e.g. the
     child seen from two candidate parents) on their common samples: z > 0 favours ``a``; z is
     ≈ N(0, 1) when both explain the data equally well.  NaN when they share fewer than
-    MIN_SAMPLES samples.
+    MIN_SAMPLES samples or either lacks its per-sample residuals.
 
     Per-sample Gaussian log-likelihood of the 3-D position residual, each fit at its own ML
     variance; the log-likelihood ratio less the BIC parameter correction, over its standard
     error √(N·var(d)/s), s the effective sample fraction of the per-sample differences d (lag-1
     autocorrelation, as in :func:`effective_fraction`)."""
+    if a.position_residuals is None or b.position_residuals is None:
+        return float("nan")
     t, ia, ib = np.intersect1d(a.times, b.times, return_indices=True)
     n = t.size
     if n < MIN_SAMPLES:

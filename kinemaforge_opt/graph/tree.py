@@ -13,14 +13,17 @@ within SIGNIFICANCE·σ of the noise) are merged first
 (union–find); the group holding the world is the base, so the static part is *found* from the
 data.  The tree is the maximum spanning arborescence on log ρ (networkx, Edmonds) rooted at the
 base: the root's in-edges are EXCLUDED, as networkx has no root argument — this is the
-contextual preference for the ground/static part as root.  ``ArborescenceIterator`` yields the
-k best trees.  ``method="greedy"`` is the ablation without a graph: attach groups one at a time,
+contextual preference for the ground/static part as root.  A child whose parent the data cannot
+tell from one of that parent's ancestors then hangs from the ancestor (the shorter chain,
+Occam; Vuong's closeness test, see ``_shallowest``).  ``ArborescenceIterator`` yields the k best
+trees.  ``method="greedy"`` is the ablation without a graph: attach groups one at a time,
 least-moving first, each to the already placed group that explains it best.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from itertools import islice
 
 import networkx as nx
 import numpy as np
@@ -74,7 +77,7 @@ class KinematicTree:
 @dataclass(frozen=True, eq=False)
 class GraphResult:
     """best: the chosen tree; alternatives: the next best trees (k-best, best first, excluding
-    ``best``).  edges: {(parent part, child part): {type: scored JointHypothesis}} for every
+    ``best``; fewer when alternatives re-hang onto ``best``, see ``_graph_trees``).  edges: {(parent part, child part): {type: scored JointHypothesis}} for every
     allowed edge of the constraint graph.  method: 'graph' or 'greedy'."""
 
     best: KinematicTree
@@ -274,21 +277,20 @@ def _shallowest(root, edges, arcs) -> list[tuple[str, str]]:
 
 
 def _graph_trees(parts, edges, k_best: int) -> list[KinematicTree]:
-    """The k best distinct trees: arborescences in decreasing Σ log ρ, each re-hung by
-    :func:`_shallowest` (several arborescences may re-hang to one tree: counted once)."""
+    """The trees of the k best arborescences (decreasing Σ log ρ), each re-hung by
+    :func:`_shallowest`; an arborescence that re-hangs onto an earlier tree is dropped (so fewer
+    than k trees may remain: enumerating further could take every tie combination in turn)."""
     G = nx.DiGraph()
     G.add_nodes_from(parts)
     for (a, b), hyps in edges.items():
         G.add_edge(a, b, weight=_log(_best_type(hyps).confidence))
     excluded = [(a, "base") for a in G.predecessors("base")]
     trees, seen = [], set()
-    for A in ArborescenceIterator(G, weight="weight", minimum=False, init_partition=([], excluded)):
+    for A in islice(ArborescenceIterator(G, weight="weight", minimum=False, init_partition=([], excluded)), k_best):
         arcs = _shallowest("base", edges, list(A.edges))
         if frozenset(arcs) not in seen:
             seen.add(frozenset(arcs))
             trees.append(_tree("base", parts, edges, arcs))
-            if len(trees) == k_best:
-                break
     return trees
 
 
