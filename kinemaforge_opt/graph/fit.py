@@ -404,9 +404,9 @@ def fit_all(motion: RelativeMotion) -> dict[str, JointHypothesis]:
     """Every relation type fitted to ``motion``, keyed by type.
 
     Full-pose motions whose orientations contradict their positions are fitted on the positions,
-    the orientations counting modulo one π flip (see :func:`_flip_scored`): when the better of
-    the revolute and helical fits that must explain both clearly misfits what the hinge through
-    the positions explains (see :func:`rotations_contradict`)."""
+    the orientations counting modulo a registration flip (see :func:`_flip_scored`): when the
+    better of the revolute and helical fits that must explain both clearly misfits what the
+    hinge through the positions explains (see :func:`rotations_contradict`)."""
     hyps = {kind: fit_relation(kind, motion) for kind in JOINT_TYPES}
     if motion.Rs is None:
         return hyps
@@ -425,7 +425,7 @@ def fit_all(motion: RelativeMotion) -> dict[str, JointHypothesis]:
 def rotations_contradict(full: JointHypothesis, points: JointHypothesis) -> bool:
     """True when the full-pose screw fit ``full`` misfits by more than SIGNIFICANCE times the
     position-only hinge fit ``points`` (scored by :func:`_flip_scored`) the positions or the
-    orientations — these modulo a π flip for ``points`` (RMS floored at √3·σ).
+    orientations — these modulo a registration flip for ``points`` (RMS floored at √3·σ).
 
     A registration of a part with a symmetric shape (a flat door, a drawer front) may come out
     turned by the symmetry (π about the panel's normal) on some frames: the orientation jumps,
@@ -481,11 +481,11 @@ def flip_angles(Rs: np.ndarray) -> np.ndarray:
 
 
 def _flip_scored(h: JointHypothesis, motion: RelativeMotion) -> JointHypothesis:
-    """A position-only fit ``h`` of full-pose ``motion`` with the orientations scored modulo π
-    flips: what the relation leaves of them — Rot(axis, q_t)ᵀ R_t for a hinge or screw, R_t for
-    rigid and prismatic — must stay put up to a flip (:func:`flip_angles`).  Their χ² (each
-    angle spread over its three coordinates) joins the positions', so the information criterion
-    weighs both.
+    """A position-only fit ``h`` of full-pose ``motion`` with the orientations scored modulo a
+    registration flip: what the relation leaves of them — Rot(axis, q_t)ᵀ R_t for a hinge or
+    screw, R_t for rigid and prismatic — must stay put up to a flip (:func:`flip_angles`).
+    Their χ² (each angle spread over its three coordinates) joins the positions', so the
+    information criterion weighs both.
 
     A flat door registered flipped by π on some frames still turns with its hinge between flips.
     A drawer fragment does not turn: its centroid may trace a slight arc (or jump when the

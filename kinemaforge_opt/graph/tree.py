@@ -77,8 +77,9 @@ class KinematicTree:
 @dataclass(frozen=True, eq=False)
 class GraphResult:
     """best: the chosen tree; alternatives: the next best trees (k-best, best first, excluding
-    ``best``; fewer when alternatives re-hang onto ``best``, see ``_graph_trees``).  edges: {(parent part, child part): {type: scored JointHypothesis}} for every
-    allowed edge of the constraint graph.  method: 'graph' or 'greedy'."""
+    ``best``; fewer when some re-hang onto an earlier tree, see ``_graph_trees``).  edges:
+    {(parent part, child part): {type: scored JointHypothesis}} for every allowed edge of the
+    constraint graph.  method: 'graph' or 'greedy'."""
 
     best: KinematicTree
     alternatives: tuple[KinematicTree, ...]
