@@ -11,19 +11,13 @@ from kinemaforge_opt.cli import main
 from kinemaforge_opt.errors import DataError
 from kinemaforge_opt.graph import fit_all, infer_tree, relative_motion, score_pair
 from kinemaforge_opt.io.tracks import PoseTracks, read_sturm_log, write_tracks
-from kinemaforge_opt.spatial import axis_angle_error, line_distance, screw_motion, translation_motion
+from kinemaforge_opt.spatial import axis_angle_error, line_distance, make_transform, screw_motion, translation_motion
 
 STURM = str(shared_data_dir() / "real" / "articulation" / "mechanisms_iros_2010")
 T = 30
 ANGLES = np.linspace(0.0, 1.2, T)
 AXIS = np.array([0.0, 0.1, 1.0]) / np.linalg.norm([0.0, 0.1, 1.0])
 POINT = np.array([0.5, 0.2, 0.0])
-
-
-def _pose(p):
-    X = np.eye(4)
-    X[:3, 3] = p
-    return X
 
 
 def _tracks(poses: dict, full=True) -> PoseTracks:
@@ -34,7 +28,7 @@ def _tracks(poses: dict, full=True) -> PoseTracks:
 
 
 def _door(offset=(0.9, 0.2, 0.5), pitch=0.0):
-    return [screw_motion(AXIS, POINT, a, pitch) @ _pose(offset) for a in ANGLES]
+    return [screw_motion(AXIS, POINT, a, pitch) @ make_transform(p=offset) for a in ANGLES]
 
 
 def _best(hyps):
@@ -60,14 +54,14 @@ def test_exact_helical_pitch():
 @pytest.mark.parametrize("full", [True, False])
 def test_prismatic_pair_is_prismatic(full):
     axis = np.array([1.0, 0.5, 0.0]) / np.linalg.norm([1.0, 0.5, 0.0])
-    poses = {"drawer": [translation_motion(axis, 0.3 * a) @ _pose((0, 1, 0.3)) for a in ANGLES]}
+    poses = {"drawer": [translation_motion(axis, 0.3 * a) @ make_transform(p=(0, 1, 0.3)) for a in ANGLES]}
     best = _best(score_pair(fit_all(relative_motion(_tracks(poses, full), None, 0))))
     assert best.type == "prismatic" and axis_angle_error(best.axis_world, axis) < 1e-6
 
 
 def test_rigid_pair_gives_rigid_edge_and_merges():
     door = _door()
-    tracks = _tracks({"door": door, "handle": [X @ _pose((0.1, 0, 0.3)) for X in door], "body": [np.eye(4)] * T})
+    tracks = _tracks({"door": door, "handle": [X @ make_transform(p=(0.1, 0, 0.3)) for X in door], "body": [np.eye(4)] * T})
     hyps = score_pair(fit_all(relative_motion(tracks, 0, 1)))
     assert _best(hyps).type == "rigid" and hyps["rigid"].confidence > 0.95
     res = infer_tree(tracks)
@@ -79,7 +73,7 @@ def test_rigid_pair_gives_rigid_edge_and_merges():
 def test_tree_topology_and_kbest():
     tracks = _tracks({
         "door": _door(),
-        "drawer": [translation_motion([1, 0, 0], 0.3 * a) @ _pose((0, 1, 0.3)) for a in ANGLES],
+        "drawer": [translation_motion([1, 0, 0], 0.3 * a) @ make_transform(p=(0, 1, 0.3)) for a in ANGLES],
     })
     res = infer_tree(tracks, k_best=3)
     assert {(j.parent, j.child, j.type) for j in res.best.joints} == {
@@ -145,7 +139,7 @@ def test_turning_lid_with_origin_near_its_axis_is_revolute():
     rng = np.random.default_rng(4)
     angles = np.linspace(0.0, 1.4, T)
     axis = np.array([1.0, 0.0, 0.0])
-    poses = [screw_motion(axis, np.zeros(3), a) @ _pose((0.0, 0.02, 0.0)) for a in angles]
+    poses = [screw_motion(axis, np.zeros(3), a) @ make_transform(p=(0.0, 0.02, 0.0)) for a in angles]
     P = np.array([[X[:3, 3] for X in poses]]) + 1e-3 * rng.normal(size=(1, T, 3))
     R = np.array([[X[:3, :3] for X in poses]])
     best = _best(score_pair(fit_all(relative_motion(PoseTracks(np.arange(T) * 0.1, ("lid",), P, R), None, 0))))

@@ -15,7 +15,9 @@ from kinemaforge_opt.graph.fit import JointHypothesis
 from kinemaforge_opt.graph.score import closeness_z
 from kinemaforge_opt.graph.tree import _graph_trees
 from kinemaforge_opt.io.tracks import PoseTracks
-from kinemaforge_opt.spatial import axis_angle_error, screw_motion, translation_motion
+from kinemaforge_opt.spatial import axis_angle_error, make_transform, screw_motion, translation_motion
+
+from .tracks import noisy_track
 
 T = 30
 SIGMA_P = 1e-3  # position noise per coordinate [m]
@@ -25,16 +27,8 @@ HINGE_POINT = np.array([0.3, 0.1, 0.0])
 RAIL = np.array([0.0, -1.0, 0.05]) / np.linalg.norm([0.0, -1.0, 0.05])
 
 
-def _pose(p):
-    X = np.eye(4)
-    X[:3, 3] = p
-    return X
-
-
-def _noisy(poses, rng, sigma_p=SIGMA_P, sigma_r=SIGMA_R):
-    P = np.array([X[:3, 3] for X in poses]) + sigma_p * rng.normal(size=(len(poses), 3))
-    R = np.array([X[:3, :3] @ Rotation.from_rotvec(sigma_r * rng.normal(size=3)).as_matrix() for X in poses])
-    return P, R
+def _noisy(poses, rng):
+    return noisy_track(poses, rng, SIGMA_P, SIGMA_R)
 
 
 def _tracks(tracks: dict) -> PoseTracks:
@@ -52,9 +46,9 @@ def _coaxial_doors(rng, noise=True):
     turns about that line: both parents explain it alike."""
     a1 = np.r_[np.linspace(0.0, 1.2, T // 2), np.full(T - T // 2, 1.2)]
     a2 = np.r_[np.zeros(T // 2), np.linspace(0.0, 1.0, T - T // 2)]
-    freezer = [screw_motion(HINGE, HINGE_POINT, a) @ _pose((0.6, 0.1, 1.4)) for a in a1]
-    fridge = [screw_motion(HINGE, HINGE_POINT, a) @ _pose((0.6, 0.1, 0.6)) for a in a2]
-    body = [_pose((0.6, -0.3, 0.9))] * T
+    freezer = [screw_motion(HINGE, HINGE_POINT, a) @ make_transform(p=(0.6, 0.1, 1.4)) for a in a1]
+    fridge = [screw_motion(HINGE, HINGE_POINT, a) @ make_transform(p=(0.6, 0.1, 0.6)) for a in a2]
+    body = [make_transform(p=(0.6, -0.3, 0.9))] * T
     if not noise:
         split = lambda poses: (np.array([X[:3, 3] for X in poses]), np.array([X[:3, :3] for X in poses]))  # noqa: E731
         return _tracks({"body": split(body), "freezer": split(freezer), "fridge": split(fridge)})
@@ -95,8 +89,8 @@ def test_door_on_a_door_edge_keeps_its_moving_parent():
     edge = np.array([0.5, 0.0, 0.0])  # leaf 2's hinge line, in leaf 1's frame
     leaf2 = [X @ screw_motion(HINGE, edge, b) for X, b in zip(leaf1, a2)]
     tracks = _tracks({
-        "leaf1": _noisy([X @ _pose((0.25, 0.0, 0.5)) for X in leaf1], rng),
-        "leaf2": _noisy([X @ _pose((0.75, 0.0, 0.5)) for X in leaf2], rng),
+        "leaf1": _noisy([X @ make_transform(p=(0.25, 0.0, 0.5)) for X in leaf1], rng),
+        "leaf2": _noisy([X @ make_transform(p=(0.75, 0.0, 0.5)) for X in leaf2], rng),
     })
     res = infer_tree(tracks)
     assert _arcs(res) == {("base", "leaf1", "revolute"), ("leaf1", "leaf2", "revolute")}
@@ -162,7 +156,7 @@ def test_bowed_drawer_fragment_with_flips_is_prismatic(seed):
     d = np.linspace(0.0, 0.3, T)
     u = 2.0 * d / d[-1] - 1.0
     bow = 0.025 * (1.0 - u**2) * np.array([1.0, 0.0, 0.0])[:, None]  # ⟂ the rail
-    poses = [translation_motion(RAIL, di) @ _pose(np.array([0.2, 0.0, 0.3]) + b) for di, b in zip(d, bow.T)]
+    poses = [translation_motion(RAIL, di) @ make_transform(p=np.array([0.2, 0.0, 0.3]) + b) for di, b in zip(d, bow.T)]
     P, R = _noisy(poses, rng)
     flip = np.arange(T) >= T // 2
     R[flip] = R[flip] @ Rotation.from_rotvec(np.pi * RAIL).as_matrix()

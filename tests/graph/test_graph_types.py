@@ -8,7 +8,9 @@ from scipy.spatial.transform import Rotation
 from kinemaforge_opt.errors import DataError
 from kinemaforge_opt.graph import fit_all, infer_tree, relative_motion, score_pair
 from kinemaforge_opt.io.tracks import PoseTracks
-from kinemaforge_opt.spatial import axis_angle_error, screw_motion, translation_motion
+from kinemaforge_opt.spatial import axis_angle_error, make_transform, screw_motion, translation_motion
+
+from .tracks import noisy_track
 
 T = 20
 SIGMA_P = 1.5e-3  # position noise per coordinate [m]
@@ -17,23 +19,8 @@ HINGE = np.array([0.0, 0.0, 1.0])
 RAIL = np.array([0.0, -1.0, 0.05]) / np.linalg.norm([0.0, -1.0, 0.05])
 
 
-def _pose(p):
-    X = np.eye(4)
-    X[:3, 3] = p
-    return X
-
-
 def _noisy(poses, seed, flip=None):
-    """(T, 4, 4) true poses -> (P (T, 3), R (T, 3, 3)) with white noise; ``flip``: (mask (T,),
-    body-frame rotation vector) applied on the masked frames, as a registration turned by a shape
-    symmetry about the part's centroid (the position is unchanged)."""
-    rng = np.random.default_rng(seed)
-    P = np.array([X[:3, 3] for X in poses]) + SIGMA_P * rng.normal(size=(len(poses), 3))
-    R = np.array([X[:3, :3] @ Rotation.from_rotvec(SIGMA_R * rng.normal(size=3)).as_matrix() for X in poses])
-    if flip is not None:
-        mask, w = flip
-        R[mask] = R[mask] @ Rotation.from_rotvec(w).as_matrix()
-    return P, R
+    return noisy_track(poses, np.random.default_rng(seed), SIGMA_P, SIGMA_R, flip)
 
 
 def _tracks(*tracks):
@@ -43,11 +30,11 @@ def _tracks(*tracks):
 
 def _door(angles, width=0.4):
     """A door panel's centroid frame, half a width from a vertical hinge through (0.3, 0.1, 0.2)."""
-    return [screw_motion(HINGE, np.array([0.3, 0.1, 0.2]), a) @ _pose((0.3 + width / 2, 0.1, 0.2)) for a in angles]
+    return [screw_motion(HINGE, np.array([0.3, 0.1, 0.2]), a) @ make_transform(p=(0.3 + width / 2, 0.1, 0.2)) for a in angles]
 
 
 def _drawer(stroke=0.3):
-    return [translation_motion(RAIL, d) @ _pose((0.2, 0.0, 0.3)) for d in np.linspace(0.0, stroke, T)]
+    return [translation_motion(RAIL, d) @ make_transform(p=(0.2, 0.0, 0.3)) for d in np.linspace(0.0, stroke, T)]
 
 
 def _best(hyps):
@@ -78,7 +65,7 @@ def test_translation_between_two_moving_parts_is_prismatic():
     the drawer is a pure translation plus noise, never a hinge or a screw."""
     drawer = _drawer()
     tray_rail = np.array([1.0, 0.0, 0.0])
-    tray = [X @ translation_motion(tray_rail, d) @ _pose((0.0, 0.0, 0.05)) for X, d in zip(drawer, np.linspace(0.0, 0.15, T))]
+    tray = [X @ translation_motion(tray_rail, d) @ make_transform(p=(0.0, 0.0, 0.05)) for X, d in zip(drawer, np.linspace(0.0, 0.15, T))]
     tracks = _tracks(_noisy(drawer, 0), _noisy(tray, 1))
     best = _best(score_pair(fit_all(relative_motion(tracks, 0, 1))))
     assert best.type == "prismatic"
@@ -119,6 +106,6 @@ def test_drawer_with_one_outlier_frame_is_prismatic():
 
 def test_barely_moving_part_is_no_motion():
     """A part that creeps 1 mm (below the 1.5 mm noise) over the recording: 'no motion'."""
-    poses = [translation_motion(RAIL, d) @ _pose((0.2, 0.0, 0.3)) for d in np.linspace(0.0, 1e-3, T)]
+    poses = [translation_motion(RAIL, d) @ make_transform(p=(0.2, 0.0, 0.3)) for d in np.linspace(0.0, 1e-3, T)]
     with pytest.raises(DataError, match="no motion"):
         infer_tree(_tracks(_noisy(poses, 2)))
