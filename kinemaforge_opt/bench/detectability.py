@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..physics.diagnose import _free_for, _n_params, before_nominal_stops
+from ..physics.diagnose import _free_for, _n_params, _rss_q, before_nominal_stops
 from ..physics.search import HypothesisFit
 from ..nlp.joint_space import friction_smoothing, match_recording, noise_std
 from ..synth.effects import ConcealedEffect, tilted_axis
@@ -27,6 +27,11 @@ ORACLE_MAX_ITER = 300
 def true_start(model, effect: ConcealedEffect) -> dict[str, np.ndarray]:
     """The fit's parameters of ``effect`` at their true values (names as ``diagnose`` frees them)."""
     j, p = effect.joint, dict(effect.params)
+    if effect.type == "axis_tilt":
+        axis = tilted_axis(model.joint(j).axis, effect.value, float(p.get("azimuth", 0.0)))
+        return {f"{j}.axis": np.asarray(axis, float)}
+    if effect.type == "inertia_error":
+        return {f"{model.joint(j).child}.inertia_ratio": np.array([effect.value])}
     values = {
         "viscous_damping": {"damping": effect.value},
         "coulomb_friction": {"coulomb": effect.value},
@@ -35,19 +40,14 @@ def true_start(model, effect: ConcealedEffect) -> dict[str, np.ndarray]:
         "constant_bias": {"bias": effect.value},
         "quadratic_drag": {"drag": effect.value},
         "limit_contact": {"limit_stop": effect.value, "limit_stiffness": p.get("stiffness")},
-    }.get(effect.type)
-    if effect.type == "axis_tilt":
-        axis = tilted_axis(model.joint(j).axis, effect.value, float(p.get("azimuth", 0.0)))
-        return {f"{j}.axis": np.asarray(axis, float)}
-    if effect.type == "inertia_error":
-        return {f"{model.joint(j).child}.inertia_ratio": np.array([effect.value])}
+    }[effect.type]
     return {f"{j}.{k}": np.array([float(v)]) for k, v in values.items() if v is not None}
 
 
 def oracle_delta_bic(er: EffectRecording) -> float | None:
     """ΔBIC of the true effects (free, started at their true values) against the nominal model on
     ``er.recording``; None on a null case or when either fit fails."""
-    effects = [e for e in er.effects if e.type != "limit_contact" or er.stop_reached]
+    effects = er.shown_effects
     if not effects:
         return None
     model = er.model
@@ -64,5 +64,5 @@ def oracle_delta_bic(er: EffectRecording) -> float | None:
     if not (nominal.success and truth.success):
         return None
     n = fit_rec.q.size
-    rss = [float(np.sum(((t.q_fit - fit_rec.q) / sigma) ** 2)) for t in (nominal, truth)]
-    return float(n * np.log(rss[1] / rss[0]) + _n_params(names) * np.log(n))
+    gain = _rss_q(truth.q_fit, fit_rec.q, sigma) / _rss_q(nominal.q_fit, fit_rec.q, sigma)
+    return float(n * np.log(gain) + _n_params(names) * np.log(n))

@@ -94,7 +94,7 @@ def run_case(case: str, noise_seed: int = 0) -> list[CaseScore]:
     from .detectability import oracle_delta_bic
 
     er = effect_recording(case, noise_seed)
-    truth = {e.type: e.value for e in er.effects if e.type != "limit_contact" or er.stop_reached}
+    truth = {e.type: e.value for e in er.shown_effects}
     _, held = split(er.recording.select(er.model.joint_names), HOLDOUT)
     t0 = time.perf_counter()
     d = diagnose(er.model, er.recording, holdout_fraction=HOLDOUT)
@@ -125,27 +125,30 @@ def summarise(scores: list[CaseScore]) -> dict[str, dict]:
     def f1(tp: int, fp: int, fn: int) -> float | None:
         return 2 * tp / (2 * tp + fp + fn) if tp + fp + fn else None
 
+    def counts(xs: list[CaseScore]) -> tuple[tuple[int, int, int], tuple[int, int, int]]:
+        """(TP, FP, missed) summed over ``xs``: strict, and crediting equivalent explanations."""
+        strict = tuple(sum(getattr(x, k) for x in xs) for k in ("true_positives", "false_positives", "missed"))
+        return strict, tuple(sum(x.class_scores[i] for x in xs if x.class_scores) for i in range(3))
+
     out = {}
     for m in METHODS:
         s = [x for x in scores if x.method == m]
         if not s:
             continue
-        tp, fp, fn = (sum(getattr(x, k) for x in s) for k in ("true_positives", "false_positives", "missed"))
+        (tp, fp, fn), classes = counts(s)
         errs = [e for x in s for e in x.value_error.values()]
         gains = [x.rms_before / x.rms_after for x in s if x.rms_before and x.rms_after and x.truth]
-        ctp, cfp, cfn = (sum(x.class_scores[i] for x in s if x.class_scores) for i in range(3))
         sup = [x for x in s if x.supported]
-        stp, sfp, sfn = (sum(getattr(x, k) for x in sup) for k in ("true_positives", "false_positives", "missed"))
-        sctp, scfp, scfn = (sum(x.class_scores[i] for x in sup if x.class_scores) for i in range(3))
+        sup_strict, sup_classes = counts(sup)
         out[m] = {
             "cases": len(s),
-            "f1_equivalence_classes": f1(ctp, cfp, cfn),
+            "f1_equivalence_classes": f1(*classes),
             "precision": tp / (tp + fp) if tp + fp else None,
             "recall": tp / (tp + fn) if tp + fn else None,
             "f1": f1(tp, fp, fn),
             "supported_cases": len(sup),
-            "f1_supported": f1(stp, sfp, sfn),
-            "f1_supported_equivalence_classes": f1(sctp, scfp, scfn),
+            "f1_supported": f1(*sup_strict),
+            "f1_supported_equivalence_classes": f1(*sup_classes),
             "null_false_positives": sum(x.false_positives for x in s if not x.truth),
             "median_value_error": float(np.median(errs)) if errs else None,
             "median_heldout_gain": float(np.median(gains)) if gains else None,

@@ -29,6 +29,11 @@ class EffectRecording:
     effects: tuple[ConcealedEffect, ...]
     stop_reached: bool
 
+    @property
+    def shown_effects(self) -> tuple[ConcealedEffect, ...]:
+        """The concealed effects the motion shows: a limit contact only if its stop was reached."""
+        return tuple(e for e in self.effects if e.type != "limit_contact" or self.stop_reached)
+
 
 def stroke_plan():
     """Two strokes (to 50 % and back to 30 % of the range), each released and left free, so the
