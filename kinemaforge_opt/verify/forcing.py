@@ -11,12 +11,29 @@ with T_world_P(t), T_world_C(t) the representatives' poses (identity for the roo
     M(t) = T_world_P(t)⁻¹ T_world_C(t),    D(t) = M(t) M(s0)⁻¹   (the child's motion since s0,
                                                                   expressed in P's track frame)
     a_P = R_world_P(s0)ᵀ a_world                                 (the joint axis in that frame)
-    revolute / helical:  q(t) = log_SO(3)(R_D(t)) · a_P   (unwrapped over time)   [rad]
-    prismatic:           q(t) = p_D(t) · a_P                                        [m]
+    revolute / helical:  q(t) = log_SO(3)(R_D(t)) · a_P + k(t) π   (unwrapped over time)   [rad]
+    prismatic:           q(t) = (p_M(t) − p_M(s0)) · a_P                                    [m]
 
 with a_world the joint axis in the world at q = 0 (forward kinematics of the model).  Steps at
 which a joint's two tracks are not both observed are filled by linear interpolation in time (held
 at the ends) and reported.
+
+A track's *orientation* can be off by a half-turn: registration fits a symmetric part (a door or
+lid slab, a drawer front) equally well turned over, and a tracker may switch between the two
+fits (on protocol_microwave_0 the door's track turns by π about the hinge direction between two
+steps while its position moves on smoothly: q jumped by π, the replay drifted 0.43 m).  Its
+*position* (a point of the part) has no such ambiguity, so it decides:
+
+* prismatic: the displacement of the child track's origin, not the translation of D (which a
+  turned-over orientation carries off by up to twice the origin's lever arm); equal when the
+  orientation is constant;
+* revolute / helical: the angle the child track's origin sweeps about the joint line,
+  q_pos(t) = ∠(u⊥(s0), u⊥(t)) about a_P, u⊥ the origin's offset from the line perpendicular to
+  it (c_P the joint origin in P's track frame), picks the half-turn branch:
+  k(t) = round((q_pos(t) − q_rot(t)) / π).  The orientation still gives the value (q_pos is
+  biased by the joint origin's error and the centroid's drift, ~0.1 rad on that door).  Where the
+  origin lies near the line (radius within 3 RMS of its own scatter about the mean radius, or
+  a micrometre) q_pos says nothing and k = 0.
 
 Joint forces (:func:`map_wrenches`).  A wrench row is a force f (N) at a world point p (m) but
 does not say which link it pushes.  The rows are cut into *contacts*: runs of non-zero force whose
@@ -160,17 +177,40 @@ def joint_values(model: ArticulatedModel, tracks: PoseTracks, link_tracks: Mappi
                             f"at {int(ok.sum())} time step(s); at least 2 are needed")
         idx = np.flatnonzero(ok)
         M = np.linalg.inv(Tp[idx]) @ Tc[idx]
-        D = M @ np.linalg.inv(np.linalg.inv(Tp[s0]) @ Tc[s0])
+        M0 = np.linalg.inv(Tp[s0]) @ Tc[s0]
         a_P = Tp[s0][:3, :3].T @ a_world
         if j.type == "prismatic":
-            qi = D[:, :3, 3] @ a_P
+            qi = (M[:, :3, 3] - M0[:3, 3]) @ a_P
         else:
+            D = M @ np.linalg.inv(M0)
             qi = np.unwrap(Rotation.from_matrix(D[:, :3, :3]).as_rotvec() @ a_P)
+            c_P = (np.linalg.inv(Tp[s0]) @ np.r_[data.oMi[jid].translation, 1.0])[:3]
+            qi += np.pi * _half_turns(M[:, :3, 3] - c_P, M0[:3, 3] - c_P, a_P, qi)
             qi -= 2 * np.pi * np.round(np.interp(s0, idx, qi) / (2 * np.pi))
         q[:, i] = np.interp(np.arange(T), idx, qi)
         observed[idx, i] = True
     names = {link: (None if k is None else tracks.names[k]) for link, k in reps.items()}
     return JointValues(tracks.times.copy(), model.joint_names, q, observed, s0, names)
+
+
+POSITION_FLOOR_M = 1e-6
+"""Scatter floor [m] below which a track origin's radius about a joint line is numerical noise."""
+
+
+def _half_turns(u: np.ndarray, u0: np.ndarray, axis: np.ndarray, q_rot: np.ndarray) -> np.ndarray:
+    """(T,) integer k per step such that q_rot + k π is the branch of a revolute joint's value that
+    the child track origin's position agrees with (module docs).
+
+    u: (T, 3) the origin's offset from a point of the joint line, u0: (3,) that offset at the zero
+    step [m]; axis: (3,) unit; q_rot: (T,) the orientation's reading, unwrapped [rad]."""
+    u_perp = u - np.outer(u @ axis, axis)
+    u0_perp = u0 - (u0 @ axis) * axis
+    r, r0 = np.linalg.norm(u_perp, axis=1), float(np.linalg.norm(u0_perp))
+    scatter = max(float(np.sqrt(np.mean((r - r.mean()) ** 2))), POSITION_FLOOR_M)
+    q_pos = np.unwrap(np.arctan2(np.cross(u0_perp, u_perp) @ axis, u_perp @ u0_perp))
+    k = np.round((q_pos - q_rot) / np.pi)
+    informative = (r > 3 * scatter) & (r0 > 3 * scatter)
+    return np.where(informative, k, 0.0)
 
 
 def _contacts(w: Wrenches) -> list[tuple[int, int]]:
