@@ -15,9 +15,23 @@ by the free-space tests of :mod:`change` against every depth image at s: the sco
 the share of the proposal's points consistent with the images minus the share the images saw
 through.  A candidate is acceptable when the points the images can judge are mostly consistent
 (:func:`acceptable`).  Only when both candidates fail are principal-axes alignments onto the moving clusters at s tried
-(re-detection; they also fit a symmetric part flipped).  With no acceptable candidate the
-proposal is unobserved at s (NaN: occluded or out of view), and the next step starts from the
-last solved pose.
+(re-detection).  The images accept every alignment of a symmetric part (a flat door turned
+half a turn about its normal covers the same surface), so of the acceptable re-detections the one
+nearest the constant-velocity prediction is kept (:func:`displacement`).  With no acceptable
+candidate the proposal is unobserved at s (NaN: occluded or out of view), and the next step starts
+from the last solved pose.
+
+Slips: a fragment sliding along itself (a drawer's side wall) lags its part until no guess
+verifies; re-detection may then put it on another face of the part (90° and tens of cm in one
+step), which the images accept and from which tracking continues.  A sampled rigid motion changes
+its velocity smoothly; a slip is a one-step spike: the pose at s lies farther than the wide coarse
+ICP radius (WIDE_FACTOR·ICP_COARSE_VOXELS voxels, the farthest ICP reaches from a prediction)
+from the constant-velocity prediction of the poses before it, *and* the next pose lies that far
+from the prediction continuing the jump (a part that starts or stops moving between two samples
+changes its velocity once, not twice): when the next pose is back on the prediction from
+before the spike, the spiked pose alone is unobserved (an outlier, e.g. a half-turn flip); when it
+is on neither, tracking went on from a wrong pose and the track ends there in that direction (the
+spiked and the next pose are unobserved; :func:`jump`).
 
 Growing: a moving part's points near a hinge move less than the free-space test can resolve
 (τ ≈ 3√2 σ_z), so the moving cluster misses a strip along the axis; a drawer's inside is never
@@ -106,6 +120,38 @@ def acceptable(consistent: float, violated: float) -> bool:
     consistent, and at most MAX_VIOLATED_SHARE of all points are seen through."""
     judged = consistent + violated
     return judged >= MIN_VISIBLE_SHARE and consistent >= MIN_CONSISTENT_SHARE * judged and violated <= MAX_VIOLATED_SHARE
+
+
+def displacement(A: np.ndarray, B: np.ndarray, points: np.ndarray) -> float:
+    """RMS distance [m] between (N, 3) ``points`` moved by the (4, 4) motions A and B."""
+    d = points @ (A[:3, :3] - B[:3, :3]).T + (A[:3, 3] - B[:3, 3])
+    return float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
+
+
+def _predict(poses: list[np.ndarray], ahead: int = 1) -> np.ndarray:
+    """Constant-velocity extrapolation ``ahead`` steps past the last of (4, 4) ``poses`` (the
+    last pose itself when there is only one)."""
+    if len(poses) < 2:
+        return poses[-1]
+    return np.linalg.matrix_power(poses[-1] @ np.linalg.inv(poses[-2]), ahead) @ poses[-1]
+
+
+def jump(before: list[np.ndarray], pose: np.ndarray, after: np.ndarray, points: np.ndarray,
+         tolerance: float) -> str | None:
+    """How the (4, 4) world motion ``pose`` of (N, 3) ``points`` sits between the solved poses
+    ``before`` it (the last one or two, in tracking order) and the pose ``after`` it (module doc):
+    None when it lies within ``tolerance`` [m] (:func:`displacement`) of the constant-velocity
+    prediction from ``before``, or ``after`` continues from it within ``tolerance`` (a velocity
+    change, once); "outlier" when ``after`` is back within ``tolerance`` of the prediction from
+    ``before`` two steps ahead (a one-step spike: ``pose`` alone is wrong); else "slip" (tracking
+    went on from a wrong pose)."""
+    if displacement(pose, _predict(before), points) <= tolerance:
+        return None
+    if displacement(after, _predict(before, 2), points) <= tolerance:
+        return "outlier"
+    if displacement(after, _predict([before[-1], pose]), points) <= tolerance:
+        return None
+    return "slip"
 
 
 def _principal_frame(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -240,7 +286,8 @@ class Tracker:
         if self.trees[s] is None or len(self.targets[s]) < 3:
             return None
         for cands, wide in [([g], False) for g in guesses] + [(guesses, True), (None, False)]:
-            if cands is None:  # re-detection
+            redetect = cands is None
+            if redetect:
                 cands = [T for cluster in self.moving_clusters(s) for T in pca_alignments(points, cluster)]
             best, best_score = None, -np.inf
             for T0 in cands:
@@ -249,8 +296,10 @@ class Tracker:
                 seen = self.verdicts(points @ T0[:3, :3].T + T0[:3, 3], s)[0] > 0
                 T = self._icp(points[seen] if seen.sum() >= MIN_VISIBLE_SHARE * len(points) else points, s, T0, wide)
                 cons, viol = self.verify(points @ T[:3, :3].T + T[:3, 3], s)
-                if cons - viol > best_score and acceptable(cons, viol):
-                    best, best_score = T, cons - viol
+                # re-detections: the acceptable one nearest the prediction (module doc)
+                score = -displacement(T, guesses[0], points) if redetect else cons - viol
+                if score > best_score and acceptable(cons, viol):
+                    best, best_score = T, score
             if best is not None:
                 return best
         return None
@@ -263,18 +312,30 @@ class Tracker:
         sample = points if len(points) <= MAX_TRACK_POINTS else points[rng.choice(len(points), MAX_TRACK_POINTS, replace=False)]
         Ts = np.full((n, 4, 4), np.nan)
         Ts[ref] = np.eye(4)
+        reach = WIDE_FACTOR * ICP_COARSE_VOXELS * self.voxel
         for direction in (1, -1):
-            solved = [np.eye(4)]
+            solved, steps = [np.eye(4)], [ref]
             s = ref + direction
             while 0 <= s < n:
                 guesses = [solved[-1]]
                 if len(solved) >= 2:  # constant velocity first, then the last pose
                     guesses.insert(0, solved[-1] @ np.linalg.inv(solved[-2]) @ solved[-1])
                 T = self.solve_step(sample, s, guesses)
-                if T is not None:
-                    Ts[s] = T
-                    solved.append(T)
                 s += direction
+                if T is None:
+                    continue
+                Ts[s - direction] = T
+                solved.append(T)
+                steps.append(s - direction)
+                if len(solved) < 3:
+                    continue
+                kind = jump(solved[-4:-2], solved[-2], T, sample, reach)
+                if kind == "outlier":  # the spiked pose alone
+                    Ts[steps[-2]] = np.nan
+                    del solved[-2], steps[-2]
+                elif kind == "slip":  # the spiked pose and the one built on it; the track ends here
+                    Ts[steps[-2]] = Ts[steps[-1]] = np.nan
+                    break
         grown = self.grow(ref, points, Ts)
         return Proposal(name, ref, self.grow_far(ref, grown, Ts), Ts)
 

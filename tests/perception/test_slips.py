@@ -1,0 +1,61 @@
+"""Track slips (perception.track.jump): a one-step spike in a track's velocity is an outlier or a
+slip, a part that starts or stops moving between two samples is neither."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from kinemaforge_opt.perception.track import displacement, jump
+
+RNG = np.random.default_rng(0)
+# a drawer-sized box surface: 40 x 30 x 15 cm, points on its faces
+BOX = RNG.uniform([-0.2, -0.15, 0.0], [0.2, 0.15, 0.15], (600, 3))
+TOL = 0.07  # [m] the wide ICP reach of a ~6 mm voxel (3 x 4 voxels)
+
+
+def _pose(rotvec=(0.0, 0.0, 0.0), t=(0.0, 0.0, 0.0), about=np.zeros(3)) -> np.ndarray:
+    """(4, 4) world motion: rotation ``rotvec`` about the point ``about``, then translation t [m]."""
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
+    T[:3, 3] = about - T[:3, :3] @ about + np.asarray(t)
+    return T
+
+
+def _drawer(stroke_per_step: list[float]) -> list[np.ndarray]:
+    """Poses of a drawer pulled along -y by the given stroke [m] per step, from the reference."""
+    y = np.concatenate([[0.0], np.cumsum(stroke_per_step)])
+    return [_pose(t=(0.0, -v, 0.0)) for v in y]
+
+
+def test_displacement_is_the_rms_point_distance():
+    A, B = _pose(t=(0.03, 0.0, 0.0)), np.eye(4)
+    assert abs(displacement(A, B, BOX) - 0.03) < 1e-12
+
+
+def test_a_fragment_that_jumps_onto_another_face_and_stays_is_a_slip():
+    poses = _drawer([0.02, 0.03, 0.04])
+    # the fragment lands on a face 90 degrees away and 29 cm off, and tracking goes on from there
+    slipped = poses[-1] @ _pose(rotvec=(0.0, 0.0, np.pi / 2), t=(0.11, -0.08, -0.26))
+    after = slipped @ _pose(t=(0.0, -0.002, 0.0))
+    assert jump(poses[-2:], slipped, after, BOX, TOL) == "slip"
+    # the true pull for comparison: on the prediction
+    assert jump(poses[-2:], _pose(t=(0.0, -0.14, 0.0)), _pose(t=(0.0, -0.19, 0.0)), BOX, TOL) is None
+
+
+def test_a_half_turn_flip_between_true_poses_is_an_outlier():
+    about = np.array([0.2, 0.0, 0.0])  # a door hinged at its edge, 7.7 degrees per step
+    door = [_pose(rotvec=(0.0, 0.0, 0.134 * i), about=about) for i in range(8)]
+    flipped = door[6] @ _pose(rotvec=(np.pi, 0.0, 0.0))  # the flat door registered upside down
+    assert jump(door[4:6], flipped, door[7], BOX, TOL) == "outlier"
+    assert jump(door[4:6], door[6], door[7], BOX, TOL) is None
+
+
+def test_smooth_and_sudden_motions_are_neither():
+    about = np.array([0.2, 0.0, 0.0])
+    door = [_pose(rotvec=(0.0, 0.0, 0.02 * i * i), about=about) for i in range(12)]  # accelerating swing
+    assert all(jump(door[k - 2:k], door[k], door[k + 1], BOX, TOL) is None for k in range(2, 11))
+    # a drawer at rest yanked 20 cm per step between two samples (a velocity change, once), then
+    # stopped at once
+    d = _drawer([0.0, 0.0, 0.2, 0.2, 0.2, 0.0, 0.0])
+    assert all(jump(d[max(k - 2, 0):k], d[k], d[k + 1], BOX, TOL) is None for k in range(1, 7))
