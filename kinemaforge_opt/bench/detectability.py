@@ -6,9 +6,13 @@ friction smoothing) once with the nominal model and once with the true effects' 
 started at their true values, and scores the gain with the information criterion ``diagnose``
 selects by: ΔBIC = n ln(RSS_true / RSS_nominal) + k ln n.  At or above ``diagnose.DELTA_BIC``
 even the truth, fitted from the right start, does not explain the recording better than the
-nominal model by the margin a BIC selection demands: either the data do not show the effect, or
-this transcription of the dynamics cannot represent it at the recording's rate.  The oracle is
-an upper bound on what the fit can show, not a detector: it uses the answer.
+nominal model by the margin a BIC selection demands: either the data do not show the effect,
+or this transcription of the dynamics cannot represent it at the recording's rate, or the true
+law makes the model open-loop unstable under the recorded force: a friction F(v) that falls with
+speed grows any error at the rate -F'(v)/m, and a steep Stribeck drop dwelt in for seconds
+amounts to tens of e-folds, so no single trajectory from one initial state, however exact the
+law, follows the recording (see tests/bench/test_detectability.py).  The oracle is an upper bound on what the fit can show, not
+a detector: it uses the answer.
 """
 
 from __future__ import annotations
