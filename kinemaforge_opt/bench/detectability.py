@@ -11,8 +11,8 @@ or this transcription of the dynamics cannot represent it at the recording's rat
 law makes the model open-loop unstable under the recorded force: a friction F(v) that falls with
 speed grows any error at the rate -F'(v)/m, and a steep Stribeck drop dwelt in for seconds
 amounts to tens of e-folds, so no single trajectory from one initial state, however exact the
-law, follows the recording (see tests/bench/test_detectability.py).  The oracle is an upper bound on what the fit can show, not
-a detector: it uses the answer.
+law, follows the recording (see tests/bench/test_detectability.py).  The oracle is an upper
+bound on what the fit can show, not a detector: it uses the answer.
 """
 
 from __future__ import annotations
