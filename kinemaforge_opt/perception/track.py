@@ -474,37 +474,40 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
             continue
         for idx in clusters(rest, tracker.voxel, tracker.min_points):
             new = tracker.track(f"p{len(proposals)}", int(r), rest[idx])
-            k = _comoving(new, proposals, ICP_COARSE_VOXELS * tracker.voxel)
+            k, a = _comoving(new, proposals, ICP_COARSE_VOXELS * tracker.voxel)
             if k is None:
                 proposals.append(new)
-            else:  # a disconnected piece of a tracked part (a drawer's floor behind its front)
+            else:  # a disconnected piece of a tracked part (a drawer's floor behind its front), or
+                # the part itself where its track was cut (a slip): it fills the steps it lacks
                 p = proposals[k]
-                T = np.linalg.inv(p.Ts_delta[new.ref])
-                proposals[k] = Proposal(p.name, p.ref, np.concatenate([p.points, new.points @ T[:3, :3].T + T[:3, 3]]), p.Ts_delta)
+                T = np.linalg.inv(p.Ts_delta[a]) @ new.Ts_delta[a]  # new's reference -> p's
+                Ts = p.Ts_delta.copy()
+                gap = ~np.isfinite(Ts[:, 0, 0]) & np.isfinite(new.Ts_delta[:, 0, 0])
+                Ts[gap] = new.Ts_delta[gap] @ np.linalg.inv(new.Ts_delta[a]) @ p.Ts_delta[a]
+                proposals[k] = Proposal(p.name, p.ref, np.concatenate([p.points, new.points @ T[:3, :3].T + T[:3, 3]]), Ts)
     return refine(tracker, proposals) if proposals else proposals
 
 
-def _comoving(new: Proposal, proposals: list[Proposal], tolerance: float) -> int | None:
-    """Index of the tracked proposal that ``new`` moves rigidly with, or None: its points, carried
-    by that proposal's motion instead of their own, land within ``tolerance`` [m] (RMS) of their
-    own track at COMOVING_SHARE of the steps both observe (a new track may fail at a few steps
-    where its piece is hidden)."""
-    best, best_share = None, 0.0
+def _comoving(new: Proposal, proposals: list[Proposal], tolerance: float) -> tuple[int | None, int | None]:
+    """(index of the tracked proposal that ``new`` moves rigidly with, anchor step), or (None,
+    None): ``new``'s points, carried from the anchor — the step both observe nearest ``new``'s
+    reference — by that proposal's motion instead of their own, land within ``tolerance`` [m]
+    (RMS) of their own track at COMOVING_SHARE of the steps both observe (a new track may fail at
+    a few steps where its piece is hidden)."""
+    best, best_share, anchor = None, 0.0, None
+    seen = np.isfinite(new.Ts_delta[:, 0, 0])
     for k, p in enumerate(proposals):
-        T_ref = p.Ts_delta[new.ref]
-        if not np.all(np.isfinite(T_ref)):
+        common = np.flatnonzero(seen & np.isfinite(p.Ts_delta[:, 0, 0]))
+        if common.size == 0:
             continue
-        x = new.points
-        agree, both = 0, 0
-        for s in range(len(new.Ts_delta)):
-            if not (np.all(np.isfinite(new.Ts_delta[s])) and np.all(np.isfinite(p.Ts_delta[s]))):
-                continue
-            both += 1
-            D = p.Ts_delta[s] @ np.linalg.inv(T_ref)  # p's motion from new.ref to s
-            a = x @ new.Ts_delta[s][:3, :3].T + new.Ts_delta[s][:3, 3]
-            b = x @ D[:3, :3].T + D[:3, 3]
-            agree += np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))) <= tolerance
-        share = agree / max(both, 1)
+        a = int(common[np.argmin(np.abs(common - new.ref))])
+        x = new.points @ new.Ts_delta[a][:3, :3].T + new.Ts_delta[a][:3, 3]  # new's points at a
+        agree = 0
+        for s in common:
+            Dn = new.Ts_delta[s] @ np.linalg.inv(new.Ts_delta[a])  # each track's motion from a to s
+            Dp = p.Ts_delta[s] @ np.linalg.inv(p.Ts_delta[a])
+            agree += displacement(Dn, Dp, x) <= tolerance
+        share = agree / common.size
         if share >= COMOVING_SHARE and share > best_share:
-            best, best_share = k, share
-    return best
+            best, best_share, anchor = k, share, a
+    return best, anchor
