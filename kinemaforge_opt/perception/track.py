@@ -478,14 +478,20 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
             if k is None:
                 proposals.append(new)
             else:  # a disconnected piece of a tracked part (a drawer's floor behind its front), or
-                # the part itself where its track was cut (a slip): it fills the steps it lacks
-                p = proposals[k]
-                T = np.linalg.inv(p.Ts_delta[a]) @ new.Ts_delta[a]  # new's reference -> p's
-                Ts = p.Ts_delta.copy()
-                gap = ~np.isfinite(Ts[:, 0, 0]) & np.isfinite(new.Ts_delta[:, 0, 0])
-                Ts[gap] = new.Ts_delta[gap] @ np.linalg.inv(new.Ts_delta[a]) @ p.Ts_delta[a]
-                proposals[k] = Proposal(p.name, p.ref, np.concatenate([p.points, new.points @ T[:3, :3].T + T[:3, 3]]), Ts)
+                # the part itself where its track was cut (a slip)
+                proposals[k] = join(proposals[k], new, a)
     return refine(tracker, proposals) if proposals else proposals
+
+
+def join(p: Proposal, new: Proposal, anchor: int) -> Proposal:
+    """``p`` with ``new``'s points (carried to ``p``'s reference through the ``anchor`` step both
+    observe) and, at the steps ``p`` lacks and ``new`` observes, ``new``'s motion continued from
+    ``p``'s pose at the anchor."""
+    T = np.linalg.inv(p.Ts_delta[anchor]) @ new.Ts_delta[anchor]  # new's reference -> p's
+    Ts = p.Ts_delta.copy()
+    gap = ~np.isfinite(Ts[:, 0, 0]) & np.isfinite(new.Ts_delta[:, 0, 0])
+    Ts[gap] = new.Ts_delta[gap] @ np.linalg.inv(new.Ts_delta[anchor]) @ p.Ts_delta[anchor]
+    return Proposal(p.name, p.ref, np.concatenate([p.points, new.points @ T[:3, :3].T + T[:3, 3]]), Ts)
 
 
 def _comoving(new: Proposal, proposals: list[Proposal], tolerance: float) -> tuple[int | None, int | None]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from kinemaforge_opt.perception.track import displacement, jump
+from kinemaforge_opt.perception.track import Proposal, _comoving, displacement, join, jump
 
 RNG = np.random.default_rng(0)
 # a drawer-sized box surface: 40 x 30 x 15 cm, points on its faces
@@ -59,3 +59,26 @@ def test_smooth_and_sudden_motions_are_neither():
     # stopped at once
     d = _drawer([0.0, 0.0, 0.2, 0.2, 0.2, 0.0, 0.0])
     assert all(jump(d[max(k - 2, 0):k], d[k], d[k + 1], BOX, TOL) is None for k in range(1, 7))
+
+
+def test_a_part_reseeded_where_its_track_was_cut_rejoins_and_fills_the_gap():
+    """A drawer pulled 3 cm per step over 8 steps; its first track (reference step 5) was cut at
+    steps 0-2; a second proposal of the same drawer seeded at step 1 is tracked over steps 0-6."""
+    truth = [_pose(t=(0.0, -0.03 * s, 0.0)) for s in range(8)]  # world motion from step 0
+    rel = lambda ref: np.stack([T @ np.linalg.inv(truth[ref]) for T in truth])  # motion from ref
+    first = rel(5)
+    first[:3] = np.nan
+    p = Proposal("p0", 5, BOX[:300] @ truth[5][:3, :3].T + truth[5][:3, 3], first)
+    second = rel(1)
+    second[7] = np.nan
+    new = Proposal("p1", 1, BOX[300:] @ truth[1][:3, :3].T + truth[1][:3, 3], second)
+    k, anchor = _comoving(new, [p], 0.01)
+    assert k == 0 and anchor == 3  # the common step nearest the new reference
+    joined = join(p, new, anchor)
+    assert np.all(np.isfinite(joined.Ts_delta))
+    np.testing.assert_allclose(joined.Ts_delta, rel(5), atol=1e-12)
+    # both pieces at the reference step of p: the whole box at step 5
+    np.testing.assert_allclose(joined.points, BOX @ truth[5][:3, :3].T + truth[5][:3, 3], atol=1e-12)
+    # a piece moving otherwise (a second drawer, still) does not join
+    still = Proposal("p2", 1, new.points, np.stack([np.eye(4)] * 8))
+    assert _comoving(still, [p], 0.01) == (None, None)
