@@ -11,29 +11,32 @@ with T_world_P(t), T_world_C(t) the representatives' poses (identity for the roo
     M(t) = T_world_P(t)⁻¹ T_world_C(t),    D(t) = M(t) M(s0)⁻¹   (the child's motion since s0,
                                                                   expressed in P's track frame)
     a_P = R_world_P(s0)ᵀ a_world                                 (the joint axis in that frame)
-    revolute / helical:  q(t) = log_SO(3)(R_D(t)) · a_P + k(t) π   (unwrapped over time)   [rad]
-    prismatic:           q(t) = (p_M(t) − p_M(s0)) · a_P                                    [m]
+    revolute / helical:  q(t) = twist of R_D(t) about a_P, on the branch its position gives   [rad]
+    prismatic:           q(t) = (p_M(t) − p_M(s0)) · a_P                                        [m]
 
 with a_world the joint axis in the world at q = 0 (forward kinematics of the model).  Steps at
 which a joint's two tracks are not both observed are filled by linear interpolation in time (held
 at the ends) and reported.
 
 A track's *orientation* can be off by a half-turn: registration fits a symmetric part (a door or
-lid slab, a drawer front) equally well turned over, and a tracker may switch between the two
-fits (on protocol_microwave_0 the door's track turns by π about the hinge direction between two
-steps while its position moves on smoothly: q jumped by π, the replay drifted 0.43 m).  Its
-*position* (a point of the part) has no such ambiguity, so it decides:
+lid slab, a drawer front) equally well turned over, and a tracker may switch between the fits.
+On protocol_microwave_0 the door's track turned by π about the hinge direction (q jumped by π, the
+replay drifted 0.43 m); on protocol_microwave_1 it turned over about horizontal axes (R_D then
+holds no rotation about the hinge at all).  The track's *position* (a point of the part) has no
+such ambiguity, so it decides:
 
 * prismatic: the displacement of the child track's origin, not the translation of D (which a
   turned-over orientation carries off by up to twice the origin's lever arm); equal when the
   orientation is constant;
-* revolute / helical: the angle the child track's origin sweeps about the joint line,
-  q_pos(t) = ∠(u⊥(s0), u⊥(t)) about a_P, u⊥ the origin's offset from the line perpendicular to
-  it (c_P the joint origin in P's track frame), picks the half-turn branch:
-  k(t) = round((q_pos(t) − q_rot(t)) / π).  The orientation still gives the value (q_pos is
-  biased by the joint origin's error and the centroid's drift, ~0.1 rad on that door).  Where the
-  origin lies near the line (radius within 3 RMS of its own scatter about the mean radius, or
-  a micrometre) q_pos says nothing and k = 0.
+* revolute / helical: q_pos(t) = ∠(u⊥(s0), u⊥(t)) about a_P, the angle the child track's origin
+  sweeps about the joint line (u⊥ its offset from the line c_P, perpendicular to a_P), unwrapped.
+  Where R_D keeps a_P upright (a_P · R_D a_P > 0: not turned over across the axis), q is R_D's
+  twist about a_P on the half-turn branch nearest q_pos, twist + π round((q_pos − twist)/π): the
+  orientation gives the value, finer than q_pos (biased by the joint origin's error and the
+  centroid's drift, ~0.1 rad on that door); elsewhere q = q_pos.  When the origin lies near the
+  line (its radius, at s0 or typically, within 3 RMS of its scatter about the mean radius, or a
+  micrometre) q_pos says nothing: q is the unwrapped twist of the upright steps, and a turned-over
+  step counts as unobserved.
 
 Joint forces (:func:`map_wrenches`).  A wrench row is a force f (N) at a world point p (m) but
 does not say which link it pushes.  The rows are cut into *contacts*: runs of non-zero force whose
@@ -182,10 +185,12 @@ def joint_values(model: ArticulatedModel, tracks: PoseTracks, link_tracks: Mappi
         if j.type == "prismatic":
             qi = (M[:, :3, 3] - M0[:3, 3]) @ a_P
         else:
-            D = M @ np.linalg.inv(M0)
-            qi = np.unwrap(Rotation.from_matrix(D[:, :3, :3]).as_rotvec() @ a_P)
             c_P = (np.linalg.inv(Tp[s0]) @ np.r_[data.oMi[jid].translation, 1.0])[:3]
-            qi += np.pi * _half_turns(M[:, :3, 3] - c_P, M0[:3, 3] - c_P, a_P, qi)
+            qi, valid = _revolute_values((M @ np.linalg.inv(M0))[:, :3, :3], M[:, :3, 3] - c_P, M0[:3, 3] - c_P, a_P)
+            idx, qi = idx[valid], qi[valid]
+            if idx.size < 2:
+                raise DataError(f"joint {j.name!r}: the track of {j.child!r} is turned over about an axis across "
+                                f"the joint at all but {idx.size} step(s), and its position lies on the joint line")
             qi -= 2 * np.pi * np.round(np.interp(s0, idx, qi) / (2 * np.pi))
         q[:, i] = np.interp(np.arange(T), idx, qi)
         observed[idx, i] = True
@@ -197,20 +202,25 @@ POSITION_FLOOR_M = 1e-6
 """Scatter floor [m] below which a track origin's radius about a joint line is numerical noise."""
 
 
-def _half_turns(u: np.ndarray, u0: np.ndarray, axis: np.ndarray, q_rot: np.ndarray) -> np.ndarray:
-    """(T,) integer k per step such that q_rot + k π is the branch of a revolute joint's value that
-    the child track origin's position agrees with (module docs).
-
-    u: (T, 3) the origin's offset from a point of the joint line, u0: (3,) that offset at the zero
-    step [m]; axis: (3,) unit; q_rot: (T,) the orientation's reading, unwrapped [rad]."""
+def _revolute_values(R_D: np.ndarray, u: np.ndarray, u0: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(q (N,) [rad], valid (N,) bool) of a revolute joint from the child's rotations since the zero
+    step R_D (N, 3, 3) and its track origin's offsets u (N, 3) from a point of the joint line (u0
+    (3,) at the zero step) [m], all in the parent's track frame; axis (3,) unit (module docs)."""
+    quat = Rotation.from_matrix(R_D).as_quat()  # (x, y, z, w)
+    twist = 2 * np.arctan2(quat[:, :3] @ axis, quat[:, 3])
+    twist = (twist + np.pi) % (2 * np.pi) - np.pi
+    upright = np.einsum("i,nij,j->n", axis, R_D, axis) > 0
     u_perp = u - np.outer(u @ axis, axis)
     u0_perp = u0 - (u0 @ axis) * axis
     r, r0 = np.linalg.norm(u_perp, axis=1), float(np.linalg.norm(u0_perp))
     scatter = max(float(np.sqrt(np.mean((r - r.mean()) ** 2))), POSITION_FLOOR_M)
+    if min(r0, float(np.median(r))) <= 3 * scatter:  # the position says nothing about the angle
+        q = np.full(len(R_D), np.nan)
+        q[upright] = np.unwrap(twist[upright])
+        return q, upright
     q_pos = np.unwrap(np.arctan2(np.cross(u0_perp, u_perp) @ axis, u_perp @ u0_perp))
-    k = np.round((q_pos - q_rot) / np.pi)
-    informative = (r > 3 * scatter) & (r0 > 3 * scatter)
-    return np.where(informative, k, 0.0)
+    q = np.where(upright, twist + np.pi * np.round((q_pos - twist) / np.pi), q_pos)
+    return q, np.ones(len(R_D), dtype=bool)
 
 
 def _contacts(w: Wrenches) -> list[tuple[int, int]]:

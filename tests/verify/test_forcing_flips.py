@@ -51,6 +51,35 @@ def test_a_door_track_turned_over_about_its_hinge_direction_keeps_its_joint_valu
     np.testing.assert_allclose(jv.q, q - q[jv.zero_step], atol=1e-9)
 
 
+def test_a_door_track_turned_over_across_its_hinge_is_read_from_its_position():
+    """Turned over about an axis across the hinge (the door's width direction) at the odd steps
+    from step 3: R_D then holds no rotation about the hinge; the origin's sweep gives q, exactly
+    when the model's hinge is the true one."""
+    model = cabinet()
+    T = 15
+    t = np.linspace(0.0, 1.0, T)
+    q = np.column_stack([0.3 * t, 1.8 * t])
+    steps = (np.arange(T) >= 3) & (np.arange(T) % 2 == 1)
+    tracks, links = _tracks(model, q, {"drawer": np.array([0.1, 0.0, 0.05]), "door": np.array([0.2, 0.0, 0.3])},
+                            {"door": (_half_turn([1, 0, 0]), steps)})
+    jv = joint_values(model, tracks, links)
+    np.testing.assert_allclose(jv.q, q - q[jv.zero_step], atol=1e-9)
+    assert jv.observed.all()
+
+
+def test_a_turned_over_step_of_a_track_on_the_hinge_line_counts_as_unobserved():
+    """Origin on the hinge: the position cannot tell the angle, so a step turned over across the
+    hinge is dropped and filled by interpolation (q linear in time: exactly)."""
+    model = cabinet()
+    T = 12
+    q = np.column_stack([np.zeros(T), np.linspace(0.0, 1.2, T)])
+    steps = np.arange(T) == 5
+    tracks, links = _tracks(model, q, {"drawer": np.zeros(3), "door": np.zeros(3)}, {"door": (_half_turn([1, 0, 0]), steps)})
+    jv = joint_values(model, tracks, links)
+    np.testing.assert_allclose(jv.q, q, atol=1e-9)
+    assert np.flatnonzero(~jv.observed[:, 1]).tolist() == [5]
+
+
 def test_a_drawer_track_turned_over_keeps_its_joint_value():
     """A slider tracked 0.15 m off its frame's origin, turned over about its own z from step 4."""
     model = slider()
