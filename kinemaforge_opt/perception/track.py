@@ -23,15 +23,17 @@ from the last solved pose.
 
 Slips: a fragment sliding along itself (a drawer's side wall) lags its part until no guess
 verifies; re-detection may then put it on another face of the part (90° and tens of cm in one
-step), which the images accept and from which tracking continues.  A sampled rigid motion changes
-its velocity smoothly; a slip is a one-step spike: the pose at s lies farther than the wide coarse
-ICP radius (WIDE_FACTOR·ICP_COARSE_VOXELS voxels, the farthest ICP reaches from a prediction)
-from the constant-velocity prediction of the poses before it, *and* the next pose lies that far
-from the prediction continuing the jump (a part that starts or stops moving between two samples
-changes its velocity once, not twice): when the next pose is back on the prediction from
-before the spike, the spiked pose alone is unobserved (an outlier, e.g. a half-turn flip); when it
-is on neither, tracking went on from a wrong pose and the track ends there in that direction (the
-spiked and the next pose are unobserved; :func:`jump`).
+step), which the images accept and from which tracking continues.  A pose is a *jump* when it lies
+farther than the wide coarse ICP radius (WIDE_FACTOR·ICP_COARSE_VOXELS voxels, the farthest ICP
+reaches from a prediction; RMS over the points) from the constant-velocity prediction of the poses
+before it (:func:`jump`).  When the next pose is back on the prediction from before, the jumped
+pose alone is unobserved (an outlier: a flat door flipped half a turn).  A jump is kept when it
+goes on along the screw of the increment before it (the same motion, faster or slower: a lid
+slammed shut) or when the next pose continues from it (a part that starts or stops moving between
+two samples changes its velocity once); otherwise tracking went on from a wrong pose and the
+track ends there in that direction (the jumped pose and the next are unobserved; a jump at the
+last solved step alone).  The part's moving points at the lost steps seed a new proposal, which
+joins it where it moves with it (:func:`join`).
 
 Growing: a moving part's points near a hinge move less than the free-space test can resolve
 (τ ≈ 3√2 σ_z), so the moving cluster misses a strip along the axis; a drawer's inside is never
@@ -54,6 +56,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import expm, logm
+from scipy.optimize import minimize_scalar
 from scipy.spatial import cKDTree
 
 from ..io.sequence import CameraInfo
@@ -136,20 +140,37 @@ def _predict(poses: list[np.ndarray], ahead: int = 1) -> np.ndarray:
     return np.linalg.matrix_power(poses[-1] @ np.linalg.inv(poses[-2]), ahead) @ poses[-1]
 
 
-def jump(before: list[np.ndarray], pose: np.ndarray, after: np.ndarray, points: np.ndarray,
+def _on_screw(before: list[np.ndarray], pose: np.ndarray, points: np.ndarray, tolerance: float) -> bool:
+    """Whether (4, 4) ``pose`` lies within ``tolerance`` [m] (:func:`displacement` of (N, 3)
+    ``points``) of the last of ``before`` moved further along the screw of the last increment,
+    by any amount up to a half-turn either way: the same motion at another speed."""
+    if len(before) < 2:
+        return False
+    xi = np.real(logm(before[-1] @ np.linalg.inv(before[-2])))  # the last increment's twist (4, 4)
+    turn = np.linalg.norm(xi[[2, 0, 1], [1, 2, 0]])  # its rotation angle [rad]
+    bound = np.pi / turn if turn > 0 else 1.0
+    res = minimize_scalar(lambda lam: displacement(pose, expm(lam * xi) @ before[-1], points),
+                          bounds=(-bound, bound), method="bounded")
+    return bool(res.fun <= tolerance)
+
+
+def jump(before: list[np.ndarray], pose: np.ndarray, after: np.ndarray | None, points: np.ndarray,
          tolerance: float) -> str | None:
     """How the (4, 4) world motion ``pose`` of (N, 3) ``points`` sits between the solved poses
-    ``before`` it (the last one or two, in tracking order) and the pose ``after`` it (module doc):
-    None when it lies within ``tolerance`` [m] (:func:`displacement`) of the constant-velocity
-    prediction from ``before``, or ``after`` continues from it within ``tolerance`` (a velocity
-    change, once); "outlier" when ``after`` is back within ``tolerance`` of the prediction from
-    ``before`` two steps ahead (a one-step spike: ``pose`` alone is wrong); else "slip" (tracking
-    went on from a wrong pose)."""
+    ``before`` it (the last one or two, in tracking order) and the pose ``after`` it (None at the
+    end of the track; module doc): None when it lies within ``tolerance`` [m]
+    (:func:`displacement`) of the constant-velocity prediction from ``before``; "outlier" when
+    ``after`` is back within ``tolerance`` of the prediction from ``before`` two steps ahead (a
+    one-step spike: ``pose`` alone is wrong); None when ``pose`` continues the last increment's
+    screw (:func:`_on_screw`: the same motion, faster or slower) or ``after`` continues from it
+    within ``tolerance`` (a velocity change, once); else "slip"."""
     if displacement(pose, _predict(before), points) <= tolerance:
         return None
-    if displacement(after, _predict(before, 2), points) <= tolerance:
+    if after is not None and displacement(after, _predict(before, 2), points) <= tolerance:
         return "outlier"
-    if displacement(after, _predict([before[-1], pose]), points) <= tolerance:
+    if _on_screw(before, pose, points, tolerance):
+        return None
+    if after is not None and displacement(after, _predict([before[-1], pose]), points) <= tolerance:
         return None
     return "slip"
 
@@ -335,7 +356,10 @@ class Tracker:
                     del solved[-2], steps[-2]
                 elif kind == "slip":  # the spiked pose and the one built on it; the track ends here
                     Ts[steps[-2]] = Ts[steps[-1]] = np.nan
+                    del solved[-2:], steps[-2:]
                     break
+            if len(solved) >= 2 and jump(solved[-3:-1], solved[-1], None, sample, reach) == "slip":
+                Ts[steps[-1]] = np.nan  # a jump at the last solved step, on no screw of the track
         grown = self.grow(ref, points, Ts)
         return Proposal(name, ref, self.grow_far(ref, grown, Ts), Ts)
 

@@ -82,3 +82,16 @@ def test_a_part_reseeded_where_its_track_was_cut_rejoins_and_fills_the_gap():
     # a piece moving otherwise (a second drawer, still) does not join
     still = Proposal("p2", 1, new.points, np.stack([np.eye(4)] * 8))
     assert _comoving(still, [p], 0.01) == (None, None)
+
+
+def test_a_lid_slammed_shut_is_no_slip():
+    """A lid turning 15 degrees per step about its hinge, then 54 degrees in one step onto its
+    base, where it stops: a speed change along the same screw."""
+    about = np.array([0.0, 0.15, 0.0])
+    angles = np.radians([0.0, 15.0, 30.0, 45.0, 99.0, 99.0])
+    lid = [_pose(rotvec=(a, 0.0, 0.0), about=about) for a in angles]
+    assert jump(lid[2:4], lid[4], lid[5], BOX, TOL) is None
+    assert jump(lid[2:4], lid[4], None, BOX, TOL) is None  # the slam as the last tracked step
+    # the same jump turned about another axis is a slip
+    off = _pose(rotvec=(0.0, np.radians(54.0), 0.0), about=about) @ lid[3]
+    assert jump(lid[2:4], off, off, BOX, TOL) == "slip"
