@@ -244,7 +244,7 @@ def pushed_links(model: ArticulatedModel, times: np.ndarray, q: np.ndarray, wren
     link's cloud at q = 0).  Deciding row by row on the nearest observed point instead flickers
     where two parts meet: on protocol_microwave_0 the handle at the door's edge went to the
     carcass in 62 of 97 pushing rows, and the NLP read the door's inertia as 0.63 of its mesh's."""
-    from ..verify.forcing import map_wrenches  # imports pinocchio only when there are forces
+    from ..verify.forcing import map_wrenches  # the verifier package (pydrake) only when there are forces
 
     mapped = map_wrenches(model, times, q, wrenches, clouds_world)
     return np.array(["" if link is None or link == model.root.name else link for link in mapped.link], dtype=object)
