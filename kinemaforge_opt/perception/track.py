@@ -334,8 +334,13 @@ class Tracker:
         Ts = np.full((n, 4, 4), np.nan)
         Ts[ref] = np.eye(4)
         reach = WIDE_FACTOR * ICP_COARSE_VOXELS * self.voxel
+        sides: list[tuple[list[np.ndarray], list[int]]] = []
         for direction in (1, -1):
             solved, steps = [np.eye(4)], [ref]
+            # one trajectory runs through the reference: the first pose of the side tracked
+            # before gives the increment before this side's first step (the first side's first
+            # step is judged once the second side is tracked)
+            lead = [sides[0][0][1]] if sides and len(sides[0][0]) > 1 else []
             s = ref + direction
             while 0 <= s < n:
                 guesses = [solved[-1]]
@@ -348,18 +353,26 @@ class Tracker:
                 Ts[s - direction] = T
                 solved.append(T)
                 steps.append(s - direction)
-                if len(solved) < 3:
+                if len(solved) < 3 or (len(solved) == 3 and not sides):
                     continue
-                kind = jump(solved[-4:-2], solved[-2], T, sample, reach)
-                if kind == "outlier":  # the spiked pose alone
+                kind = jump((lead + solved)[-4:-2], solved[-2], T, sample, reach)
+                if kind == "outlier":  # the jumped pose alone
                     Ts[steps[-2]] = np.nan
                     del solved[-2], steps[-2]
-                elif kind == "slip":  # the spiked pose and the one built on it; the track ends here
+                elif kind == "slip":  # the jumped pose and the one built on it; the side ends here
                     Ts[steps[-2]] = Ts[steps[-1]] = np.nan
                     del solved[-2:], steps[-2:]
                     break
-            if len(solved) >= 2 and jump(solved[-3:-1], solved[-1], None, sample, reach) == "slip":
+            if len(solved) >= (2 if sides else 3) and jump((lead + solved)[-3:-1], solved[-1], None, sample, reach) == "slip":
                 Ts[steps[-1]] = np.nan  # a jump at the last solved step, on no screw of the track
+            sides.append((solved, steps))
+        (solved, steps), other = sides[0], sides[1][0]
+        if len(solved) >= 2:  # the first side's first step, after the increment on the other side
+            kind = jump(other[1:2][::-1] + [np.eye(4)], solved[1], solved[2] if len(solved) > 2 else None, sample, reach)
+            if kind == "outlier":
+                Ts[steps[1]] = np.nan
+            elif kind == "slip":
+                Ts[steps[1]:] = np.nan
         grown = self.grow(ref, points, Ts)
         return Proposal(name, ref, self.grow_far(ref, grown, Ts), Ts)
 
