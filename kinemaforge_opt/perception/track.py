@@ -29,7 +29,7 @@ reaches from a prediction; RMS over the points) from the constant-velocity predi
 before it (:func:`jump`).  When the next pose is back on the prediction from before, the jumped
 pose alone is unobserved (an outlier: a flat door flipped half a turn).  A jump is kept when it
 goes on along the screw of the increment before it (the same motion, faster or slower: a lid
-slammed shut) or when the next pose continues from it (a part that starts or stops moving between
+slammed shut; checked first) or when the next pose continues from it (a part that starts or stops moving between
 two samples changes its velocity once); otherwise tracking went on from a wrong pose and the
 track ends there in that direction (the jumped pose and the next are unobserved; a jump at the
 last solved step alone).  The part's moving points at the lost steps seed a new proposal, which
@@ -159,17 +159,15 @@ def jump(before: list[np.ndarray], pose: np.ndarray, after: np.ndarray | None, p
     """How the (4, 4) world motion ``pose`` of (N, 3) ``points`` sits between the solved poses
     ``before`` it (the last one or two, in tracking order) and the pose ``after`` it (None at the
     end of the track; module doc): None when it lies within ``tolerance`` [m]
-    (:func:`displacement`) of the constant-velocity prediction from ``before``; "outlier" when
+    (:func:`displacement`) of the constant-velocity prediction from ``before`` or continues the
+    last increment's screw (:func:`_on_screw`: the same motion, faster or slower); "outlier" when
     ``after`` is back within ``tolerance`` of the prediction from ``before`` two steps ahead (a
-    one-step spike: ``pose`` alone is wrong); None when ``pose`` continues the last increment's
-    screw (:func:`_on_screw`: the same motion, faster or slower) or ``after`` continues from it
-    within ``tolerance`` (a velocity change, once); else "slip"."""
-    if displacement(pose, _predict(before), points) <= tolerance:
+    one-step spike: ``pose`` alone is wrong); None when ``after`` continues from ``pose`` within
+    ``tolerance`` (a velocity change, once); else "slip"."""
+    if displacement(pose, _predict(before), points) <= tolerance or _on_screw(before, pose, points, tolerance):
         return None
     if after is not None and displacement(after, _predict(before, 2), points) <= tolerance:
         return "outlier"
-    if _on_screw(before, pose, points, tolerance):
-        return None
     if after is not None and displacement(after, _predict([before[-1], pose]), points) <= tolerance:
         return None
     return "slip"

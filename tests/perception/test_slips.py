@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from kinemaforge_opt.perception.track import Proposal, _comoving, displacement, join, jump
+from kinemaforge_opt.perception.track import Proposal, Tracker, _comoving, displacement, join, jump
 
 RNG = np.random.default_rng(0)
 # a drawer-sized box surface: 40 x 30 x 15 cm, points on its faces
@@ -95,3 +95,45 @@ def test_a_lid_slammed_shut_is_no_slip():
     # the same jump turned about another axis is a slip
     off = _pose(rotvec=(0.0, np.radians(54.0), 0.0), about=about) @ lid[3]
     assert jump(lid[2:4], off, off, BOX, TOL) == "slip"
+
+
+class _Scripted(Tracker):
+    """A tracker whose per-step solver returns scripted world motions (NaN: none verifies), to
+    test the slip handling of :meth:`Tracker.track` alone; no growing."""
+
+    def __init__(self, poses: list[np.ndarray], voxel: float = 0.006):
+        self.clouds, self.voxel, self.poses = [None] * len(poses), voxel, poses
+
+    def solve_step(self, points, s, guesses):
+        return None if np.isnan(self.poses[s]).any() else self.poses[s]
+
+    def grow(self, ref, points, Ts):
+        return points
+
+    def grow_far(self, ref, points, Ts):
+        return points
+
+
+def _relative(world: list[np.ndarray], ref: int) -> list[np.ndarray]:
+    return [T @ np.linalg.inv(world[ref]) for T in world]
+
+
+def test_tracking_ends_a_side_at_a_slip_and_drops_a_flip():
+    world = _drawer([0.03] * 9)  # 10 steps of a drawer pulled 3 cm per step
+    truth = _relative(world, 6)
+    script = list(truth)
+    slipped = truth[2] @ _pose(rotvec=(0.0, 0.0, np.pi / 2), t=(0.11, -0.08, -0.26))
+    script[2] = script[1] = script[0] = slipped  # the backward side slips at step 2 and stays
+    script[8] = truth[8] @ _pose(rotvec=(np.pi, 0.0, 0.0))  # a half-turn flip at step 8 alone
+    Ts = _Scripted(script).track("p0", 6, BOX).Ts_delta
+    assert np.isnan(Ts[[0, 1, 2, 8]]).all()
+    for s in (3, 4, 5, 6, 7, 9):
+        np.testing.assert_allclose(Ts[s], truth[s], atol=1e-12)
+
+
+def test_tracking_keeps_a_lid_that_turns_back_at_the_reference_and_slams_shut():
+    about = np.array([0.0, 0.15, 0.0])
+    angles = np.radians([0.0, 20.0, 40.0, 60.0, 80.0, 55.0, 8.0, 0.0, 0.0])  # opened, then slammed
+    truth = _relative([_pose(rotvec=(a, 0.0, 0.0), about=about) for a in angles], 4)
+    Ts = _Scripted(truth).track("p0", 4, BOX).Ts_delta
+    np.testing.assert_allclose(Ts, np.stack(truth), atol=1e-12)
