@@ -137,12 +137,12 @@ def closed_form_lines(per: Perception, graph: GraphResult) -> dict[str, JointLin
         T_wp = T_world_track0[j.parent]
         axis = T_wp[:3, :3] @ h.axis_parent if h.axis_parent is not None else np.array([1.0, 0.0, 0.0])
         origin = (T_wp[:3, :3] @ h.origin_parent + T_wp[:3, 3]) if h.origin_parent is not None else T_world_track0[j.child][:3, 3]
-        # q from the graph is 0 at the pair's first common sample; shift it to the zero step
-        common = tracks.observed()[reps[j.child]] & (
-            tracks.observed()[reps[j.parent]] if j.parent in reps else True)
-        q_times = tracks.times[common]
+        # q from the graph is 0 at the pair's first common sample (h.times: the samples of the
+        # tracks it was fitted on, which need not be this part's representative); shift it to
+        # the zero step
+        common = np.isin(tracks.times, h.times)
         q = np.full(tracks.times.size, np.nan)
-        q[common] = np.asarray(h.q, dtype=float) - np.interp(tracks.times[s0], q_times, h.q)
+        q[common] = np.asarray(h.q, dtype=float) - np.interp(tracks.times[s0], h.times, h.q)
         lines[j.name] = JointLine(jtype, axis, origin, float(h.pitch) if jtype == "helical" else 0.0, q)
     return lines
 
