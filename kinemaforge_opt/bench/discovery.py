@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -88,8 +88,6 @@ def _baseline_after(model, held, res: BaselineResult) -> float:
 
 def run_case(case: str, noise_seed: int = 0) -> list[CaseScore]:
     """Score the three methods on catalogue case ``case`` with encoder-noise seed ``noise_seed``."""
-    from dataclasses import replace
-
     from ..physics.diagnose import diagnose
     from .detectability import oracle_delta_bic
 

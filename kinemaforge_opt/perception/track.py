@@ -341,9 +341,8 @@ class Tracker:
             lead = [sides[0][0][1]] if sides and len(sides[0][0]) > 1 else []
             s = ref + direction
             while 0 <= s < n:
-                guesses = [solved[-1]]
-                if len(solved) >= 2:  # constant velocity first, then the last pose
-                    guesses.insert(0, solved[-1] @ np.linalg.inv(solved[-2]) @ solved[-1])
+                # constant velocity first, then the last pose
+                guesses = [_predict(solved), solved[-1]] if len(solved) >= 2 else [solved[-1]]
                 T = self.solve_step(sample, s, guesses)
                 s += direction
                 if T is None:

@@ -7,7 +7,7 @@
    sampled at ``SEARCH_RATE_HZ`` or more (a faster recording is averaged down; its noise level is
    re-estimated there).  Per round only ``SCREEN`` hypotheses, ranked by a linear
    inverse-dynamics pre-screen, plus those the previous round found strong, get an NLP fit.
-   Every hypothesis (a set of (joint, effect) pairs) is a fit of one shared collocation fit built once per recording
+   Every hypothesis (a set of (joint, effect) pairs) is a fit of one shared collocation NLP built once per recording
    (:mod:`.search`; effects left out are fixed at their "off" values), with physical sign bounds
    and identifiability bounds (a stop inside the half of the recorded range on its side, a
    Stribeck speed below half the peak speed), states started from the data, and new force
