@@ -65,11 +65,19 @@ ENERGY_MODES = ("soft", "hard", "off")
 # damping and initial speed; the prior keeps the scale where the geometry puts it unless the
 # recorded forces say otherwise.
 INERTIA_PRIOR_SIGMA = float(np.log(2.0))
-# A joint arriving at the end of its observed range counts as hitting a stop when its speed drops
-# in one frame step by more than this factor and it arrived faster than STOP_MIN_SPEED × its
-# peak speed (a door that friction brings to rest slows down smoothly instead).
-STOP_DROP = 3.0
+# Stop impacts (:func:`stop_spans`).  A joint arriving at an end of its observed range hits a stop
+# when it arrived faster than STOP_MIN_SPEED × its peak speed, leaves the end (if at all) slower
+# than STOP_REST × that speed (a smooth turn at the top of a swing leaves as fast as it came, a
+# lid that fell onto its stop rests there) and its speed dropped at that frame or the one before
+# by more than STOP_DROP × the typical drop of the frames before.  Under a constant deceleration a
+# (friction bringing a door to rest) no frame-mean speed drops by more than a·Δt, the drop of every
+# frame before, so 2 leaves room for noise and for friction that grows as the speed falls.  The
+# two frames: an impact inside the last frame step lowers that step's mean speed too.
+STOP_DROP = 2.0
 STOP_MIN_SPEED = 0.1
+STOP_REST = 0.5
+# Share of a joint's observed range within which it is at an end of that range.
+STOP_BAND = 0.02
 HESSIANS = ("exact", "gauss_newton", "flat", "lbfgs")
 
 
@@ -96,7 +104,7 @@ class ScrewOptions:
     log(inertia ratio) around 1 (the mesh's inertia), a Gaussian prior added to the objective
     (``inertia_prior``; 0 or inf = no prior).  stop_impacts: leave the dynamics and energy terms
     out from the frame before a joint runs into the end of its observed range at speed (an impact
-    on a stop, which the NLP does not model) to the end of the recording.
+    on a stop, which the NLP does not model) until it has left that end (:func:`stop_spans`).
     """
 
     vis: bool = True
@@ -395,37 +403,59 @@ def _rates(t: np.ndarray, q: np.ndarray) -> tuple[CubicSpline, np.ndarray, np.nd
     return spline, v_s, a_s
 
 
-def stop_impact_time(times: np.ndarray, q: np.ndarray) -> float:
-    """Time [s] from which the recording holds a stop impact: the frame before the first frame i
-    at which a joint, after leaving its start, is within 2 % of its observed range of an end of
-    that range, arrived there faster than STOP_MIN_SPEED × its peak speed, and its speed changed
-    over that frame more than STOP_DROP× the median change over the three frames before (a smooth
-    turn or a friction stop decelerates gradually; an impact at once; the median, not the largest,
-    because at camera rate those frames may hold the end of a push); inf when there is none.
-    times (T,) [s], q (T, n) [rad or m] at the observed frames."""
+def stop_spans(times: np.ndarray, q: np.ndarray) -> list[tuple[int, int]]:
+    """Frame spans (a, b) in which a stop may act: a joint, after leaving its start, arrives at
+    frame a + 1 within STOP_BAND of its observed range of an end of that range, and the arrival is
+    an impact (see :data:`STOP_DROP`); b is the first frame after its stay at that end (the stop
+    may push it off again; the last frame if it stays).  times (T,) [s], q (T, n) [rad or m] at
+    the observed frames; every joint and every arrival is examined."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     if q.shape[0] != times.size:
         q = q.T
-    if times.size < 5:
-        return float("inf")
-    v = np.diff(q, axis=0) / np.diff(times)[:, None]  # (T-1, n): v[j] over frame step j -> j + 1
-    dv = np.abs(np.diff(v, axis=0))  # (T-2, n): dv[i-1] = |v[i] - v[i-1]|, the change at frame i
-    first = float("inf")
+    T = times.size
+    if T < 5:
+        return []
+    s = np.abs(np.diff(q, axis=0) / np.diff(times)[:, None])  # (T-1, n) speed over step j -> j + 1
+    drop = np.maximum(s[:-1] - s[1:], 0.0)  # (T-2, n): drop[i-1], the speed lost at frame i
+    spans = []
     for k in range(q.shape[1]):
         lo, hi = q[:, k].min(), q[:, k].max()
-        if hi - lo <= 0:
+        tol = STOP_BAND * (hi - lo)
+        if tol <= 0:
             continue
-        tol = 0.02 * (hi - lo)
         left = np.maximum.accumulate(np.abs(q[:, k] - q[0, k])) > tol
-        peak = np.abs(v[:, k]).max()
-        for i in range(2, times.size - 1):
-            if not (left[i] and (q[i, k] >= hi - tol or q[i, k] <= lo + tol)):
+        i = 2
+        while i < T - 1:
+            end = hi if q[i, k] >= hi - tol else lo if q[i, k] <= lo + tol else None
+            if end is None or not left[i]:
+                i += 1
                 continue
-            before = float(np.median(dv[max(i - 4, 0):i - 1, k]))
-            if abs(v[i - 1, k]) > STOP_MIN_SPEED * peak and dv[i - 1, k] > STOP_DROP * before:
-                first = min(first, float(times[i - 1]))
-            break
-    return first
+            b = i  # the stay at that end
+            while b + 1 < T and abs(q[b + 1, k] - end) <= tol:
+                b += 1
+            if _impact(s[:, k], drop[:, k], i):
+                spans.append((i - 1, min(b + 1, T - 1)))
+            i = b + 1
+    return sorted(spans)
+
+
+def _impact(s: np.ndarray, drop: np.ndarray, i: int) -> bool:
+    """Whether a joint's arrival at an end of its range at frame i (≥ 2) is a stop impact, from its
+    frame-step speeds s (T-1,) and speed drops (T-2,) (:data:`STOP_DROP`)."""
+    arrive = s[i - 2:i].max()
+    prior = min(float(np.median(drop[max(i - 4 - d, 0):i - 1 - d])) for d in (0, 1) if i - 1 - d > 0)
+    return bool(arrive > STOP_MIN_SPEED * s.max() and s[i:i + 2].max() < STOP_REST * arrive
+                and drop[i - 2:i].max() > STOP_DROP * prior)
+
+
+def stop_free(times: np.ndarray, q: np.ndarray, t_grid: np.ndarray) -> np.ndarray:
+    """(G − 1,) 1.0 for each interval of ``t_grid`` (G,) [s] outside every :func:`stop_spans` span
+    of the frames (times, q), else 0.0 (an interval is in a span when its midpoint is)."""
+    mid = (t_grid[:-1] + t_grid[1:]) / 2
+    free = np.ones(mid.size)
+    for a, b in stop_spans(times, q):
+        free[(mid > times[a]) & (mid < times[b])] = 0.0
+    return free
 
 
 def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewState,
@@ -503,16 +533,17 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
     # --- states ------------------------------------------------------------------------------
     G = t_grid.size
     if use_dyn:
-        t_stop = stop_impact_time(data.times, state.q[cols_state]) if options.stop_impacts else np.inf
-        dyn_mask = (t_grid[:-1] < t_stop - 1e-9).astype(float)  # interval k: grid k -> k + 1
+        # interval k: grid k -> k + 1
+        dyn_mask = stop_free(data.times, state.q[cols_state], t_grid) if options.stop_impacts else np.ones(G - 1)
         if not dyn_mask.any():
             dyn_mask[:] = 1.0  # an impact at the first frame: nothing would be left
         lower, upper = np.full((2 * n, G), -np.inf), np.full((2 * n, G), np.inf)
         if not options.vis:  # nothing observes q: hold the observed steps at the current values
             lower[:n, frame_cols] = upper[:n, frame_cols] = q0.T[:, frame_cols]
-        # past a stop impact no term sees v, nor q between frames: hold them (IPOPT drops them)
-        after = np.zeros(G, dtype=bool)
-        after[1:] = dyn_mask == 0  # column c ends interval c - 1
+        # in a stop span no term sees v, nor q between frames: hold them (IPOPT drops them)
+        after = np.ones(G, dtype=bool)  # column c: no free interval (c - 1 or c) touches it
+        after[1:] &= dyn_mask == 0
+        after[:-1] &= dyn_mask == 0
         x_init = np.vstack([q0.T, v0.T])
         held = np.zeros((2 * n, G), dtype=bool)
         held[n:, after] = True
@@ -870,11 +901,12 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         identifiability = dynamic_identifiability(sp, res) if identified else {}
     except np.linalg.LinAlgError as e:  # a singular state block: report why, keep the fit
         identifiability = {"error": f"{type(e).__name__}: {e}"}
-    t_stop = stop_impact_time(data.times, state.q[cols]) if sp.use_dyn and options.stop_impacts else np.inf
+    spans = stop_spans(data.times, state.q[cols]) if sp.use_dyn and options.stop_impacts else []
     if not sp.use_dyn:
         model = _without_fitted_dynamics(model, data.model)
-    if np.isfinite(t_stop):
-        notes.append(f"dyn, energy: a stop impact at {t_stop:.2f} s; the terms cover the recording before it")
+    if spans:
+        where = ", ".join(f"{data.times[a]:.2f}-{data.times[b]:.2f} s" for a, b in spans)
+        notes.append(f"dyn, energy: stop impacts; the terms leave out {where}")
     return ScrewResult(model, state.q[cols], state, terms, int(sum(s["iterations"] for s in stages)),
                        all(s["success"] for s in stages), tuple(stages), time.perf_counter() - start,
                        identified, tuple(notes), identifiability)

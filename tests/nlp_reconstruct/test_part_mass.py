@@ -91,15 +91,15 @@ def test_errors_name_the_part_and_the_count():
         moving_point_masks([np.zeros((1, 3))] * 2, [np.zeros((1, 3))], [np.eye(4)] * 2, 0.01)
 
 
-def test_stop_impact_time_finds_an_abrupt_stop_and_not_a_smooth_one():
+def test_stop_spans_find_an_abrupt_stop_and_not_a_smooth_one():
     """A door swinging at 1 rad/s into a stop at 1.0 rad (then at rest) against one that viscous
     damping brings to rest smoothly (q = 1 − e^{−2t}, same frames)."""
-    from kinemaforge_opt.nlp.reconstruction import stop_impact_time
+    from kinemaforge_opt.nlp.reconstruction import stop_spans
 
     t = np.arange(0.0, 3.0, 0.1)
     q_hit = np.minimum(t, 1.0)[:, None] + np.random.default_rng(0).normal(0, 1e-3, (t.size, 1))
-    assert stop_impact_time(t, q_hit) == pytest.approx(0.9)
+    assert stop_spans(t, q_hit) == [(9, t.size - 1)]
     q_smooth = (1 - np.exp(-2 * t))[:, None]
-    assert stop_impact_time(t, q_smooth) == np.inf
+    assert stop_spans(t, q_smooth) == []
     # a joint that starts at rest on its lower end and leaves it is not an impact
-    assert stop_impact_time(t, np.column_stack([q_smooth[:, 0], np.zeros(t.size)])) == np.inf
+    assert stop_spans(t, np.column_stack([q_smooth[:, 0], np.zeros(t.size)])) == []

@@ -19,14 +19,18 @@ def data():
     return pushed_door(60, 6)[1]
 
 
-@pytest.mark.parametrize("energy,impact", [("soft", False), ("hard", False), ("off", False), ("soft", True), ("hard", True)])
+@pytest.mark.parametrize("energy,impact", [("soft", None), ("hard", None), ("off", None), ("soft", (0.8, np.inf)),
+                                           ("hard", (0.8, np.inf)), ("soft", (0.3, 0.6))])
 def test_assembled_hessian_equals_the_exact_hessian_of_the_lagrangian(data, energy, impact, monkeypatch):
-    """With ``impact``, a stop impact is declared at 0.8 s: the intervals and energy windows after
-    it leave the objective (masked in both Hessians).  The inertia prior is on in every case."""
+    """With ``impact`` (start, end) [s], a stop span is declared there: its intervals and the
+    energy windows that touch it leave the objective (masked in both Hessians), the states only
+    it touches are held.  The inertia prior is on in every case."""
     import kinemaforge_opt.nlp.reconstruction as reco
 
     if impact:
-        monkeypatch.setattr(reco, "stop_impact_time", lambda times, q: 0.8)
+        def span(times, q):
+            return [(int(np.searchsorted(times, impact[0])), int(min(np.searchsorted(times, impact[1]), times.size - 1)))]
+        monkeypatch.setattr(reco, "stop_spans", span)
     opts = ScrewOptions(energy=energy, energy_window_s=0.5)  # 3 windows of 5 intervals
     state = initial_state(data)
     sp = build_screw_problem(data, opts, state, correspondences(data, state, 50), dense=True)
