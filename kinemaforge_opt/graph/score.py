@@ -60,9 +60,15 @@ def score_pair(hyps: dict[str, JointHypothesis]) -> dict[str, JointHypothesis]:
     bic = {
         k: c * h.chi2 + (h.n_params + s * h.n_latent) * np.log(h.n_samples) for k, h in hyps.items()
     }
-    first = next(iter(hyps.values()))
-    rms = {k: max(h.residual_rms, np.sqrt(3.0) * first.noise_sigma) for k, h in hyps.items()}
-    rot = {k: max(h.rotation_rms, np.sqrt(3.0) * first.rotation_sigma) for k, h in hyps.items()}
+    # the white-noise floors, never above the best fit's residual (but not below SIGMA_FLOOR's):
+    # that residual is noise plus model error, so a noise estimate above it is inflated by the
+    # motion itself (a lid slammed 80° between two of 12 samples defeats the local-quadratic
+    # smoother of ``noise_sigma``)
+    first, least = next(iter(hyps.values())), np.sqrt(3.0) * SIGMA_FLOOR
+    floor = max(least, min(np.sqrt(3.0) * first.noise_sigma, min(h.residual_rms for h in hyps.values())))
+    floor_r = max(least, min(np.sqrt(3.0) * first.rotation_sigma, min(h.rotation_rms for h in hyps.values())))
+    rms = {k: max(h.residual_rms, floor) for k, h in hyps.items()}
+    rot = {k: max(h.rotation_rms, floor_r) for k, h in hyps.items()}
 
     def inadequate(j, k):  # simpler model j clearly misfits where k fits (positions or rotations)
         return rms[j] > SIGNIFICANCE * rms[k] or (rot[k] > 0 and rot[j] > SIGNIFICANCE * rot[k])

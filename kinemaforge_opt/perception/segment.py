@@ -7,7 +7,8 @@ the constraint graph merges proposals that move rigidly together.
 
 Environment: among the static points, large planes that have (nearly) the whole scene on one
 side — the floor under an object, the wall behind it — are background, not part of the base
-link (their convex hull would be a slab of floor).  RANSAC with open3d ``segment_plane``.
+link (their convex hull would be a slab of floor).  RANSAC (seeded, numpy; see
+:func:`_ransac_plane`), refitted by least squares.
 """
 
 from __future__ import annotations
@@ -55,11 +56,44 @@ class Plane:
         return points @ self.normal + self.offset
 
 
+def _ransac_plane(points: np.ndarray, threshold: float, rng: np.random.Generator) -> Plane:
+    """The plane through 3 of (N, 3) ``points`` with the most inliers (within ``threshold`` [m])
+    over RANSAC_ITERATIONS random triples.  Written here rather than open3d's ``segment_plane``
+    because that one runs on OpenMP threads and, seed or not, returns a different plane from run
+    to run (a laptop's base IoU went 0.67-0.89 between identical runs)."""
+    best, best_count = None, -1
+    for _ in range(0, RANSAC_ITERATIONS, 100):
+        tri = points[rng.integers(0, len(points), (100, 3))]  # (100, 3 points, 3)
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        norm = np.linalg.norm(n, axis=1)
+        ok = norm > 0
+        n, p0 = n[ok] / norm[ok, None], tri[ok, 0]
+        counts = np.sum(np.abs(points @ n.T - np.sum(n * p0, axis=1)) <= threshold, axis=0)
+        k = int(np.argmax(counts)) if len(counts) else -1
+        if k >= 0 and counts[k] > best_count:
+            best, best_count = Plane(n[k], -float(n[k] @ p0[k])), int(counts[k])
+    return best if best is not None else Plane(np.array([0.0, 0.0, 1.0]), -float(points[:, 2].mean()))
+
+
+def _refit(points: np.ndarray, plane: Plane, threshold: float, rounds: int = 3) -> tuple[Plane, np.ndarray]:
+    """Least-squares refit of ``plane`` to its inliers among (N, 3) ``points`` (within
+    ``threshold`` [m]), repeated ``rounds`` times; returns the plane and its inlier indices.
+    RANSAC's plane passes through 3 noisy points; the refit uses all the inliers."""
+    for _ in range(rounds):
+        inliers = np.flatnonzero(np.abs(plane.distance(points)) <= threshold)
+        if len(inliers) < 3:
+            break
+        c = points[inliers].mean(axis=0)
+        n = np.linalg.svd(points[inliers] - c, full_matrices=False)[2][-1]
+        n = n if n @ plane.normal >= 0 else -n
+        plane = Plane(n, -float(n @ c))
+    return plane, np.flatnonzero(np.abs(plane.distance(points)) <= threshold)
+
+
 def environment_planes(static_points: np.ndarray, all_points: np.ndarray, threshold: float,
                        seed: int = 0) -> list[Plane]:
     """Background planes among (N, 3) static points [m] (module doc); ``all_points`` (M, 3) is
     the whole scene used for the one-side test; ``threshold`` [m] the inlier distance."""
-    o3d.utility.random.seed(seed)
     rng = np.random.default_rng(seed)
     if len(static_points) > RANSAC_MAX_POINTS:
         static_points = static_points[rng.choice(len(static_points), RANSAC_MAX_POINTS, replace=False)]
@@ -70,12 +104,9 @@ def environment_planes(static_points: np.ndarray, all_points: np.ndarray, thresh
     for _ in range(MAX_PLANES):
         if len(pool) < max(3, PLANE_MIN_SHARE * len(static_points)):
             break
-        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pool))
-        (a, b, c, d), inliers = pcd.segment_plane(threshold, 3, RANSAC_ITERATIONS)
+        plane, inliers = _refit(pool, _ransac_plane(pool, threshold, rng), threshold)
         if len(inliers) < PLANE_MIN_SHARE * len(static_points):
             break
-        n = np.array([a, b, c])
-        plane = Plane(n / np.linalg.norm(n), d / np.linalg.norm(n))
         dist = plane.distance(all_points)
         off = np.abs(dist) > threshold
         if np.mean(dist[off] < 0) > 0.5:

@@ -161,12 +161,16 @@ def jump(before: list[np.ndarray], pose: np.ndarray, after: np.ndarray | None, p
     end of the track; module doc): None when it lies within ``tolerance`` [m]
     (:func:`displacement`) of the constant-velocity prediction from ``before`` or continues the
     last increment's screw (:func:`_on_screw`: the same motion, faster or slower); "outlier" when
-    ``after`` is back within ``tolerance`` of the prediction from ``before`` two steps ahead (a
-    one-step spike: ``pose`` alone is wrong); None when ``after`` continues from ``pose`` within
-    ``tolerance`` (a velocity change, once); else "slip"."""
+    ``after`` is back within ``tolerance`` of where the tracker's two motion hypotheses put it
+    from ``before`` — constant velocity two steps ahead, or at rest at the last of ``before`` (a
+    lid slammed shut stops there) — so ``pose`` alone is wrong (a one-step spike); None when
+    ``after`` continues from ``pose`` within ``tolerance`` (a velocity change, once); else "slip".
+    The outlier test comes first: a flat part registered turned over at every other step has a
+    constant half-turn "velocity" that every next pose continues."""
     if displacement(pose, _predict(before), points) <= tolerance or _on_screw(before, pose, points, tolerance):
         return None
-    if after is not None and displacement(after, _predict(before, 2), points) <= tolerance:
+    if after is not None and min(displacement(after, _predict(before, 2), points),
+                                 displacement(after, before[-1], points)) <= tolerance:
         return "outlier"
     if after is not None and displacement(after, _predict([before[-1], pose]), points) <= tolerance:
         return None
@@ -195,6 +199,23 @@ def pca_alignments(source: np.ndarray, target: np.ndarray) -> list[np.ndarray]:
         T[:3, :3] = Et @ D @ Es.T
         T[:3, 3] = ct - T[:3, :3] @ cs
         out.append(T)
+    return out
+
+
+def symmetries(points: np.ndarray, tolerance: float) -> list[np.ndarray]:
+    """The half-turns (4, 4) about the principal axes through the centroid of (N, 3) ``points``
+    that map them onto themselves within ``tolerance`` [m] (mean nearest-neighbour distance): a
+    flat plate has three, a box with a handle none.  Registered poses differing by one of them
+    cover the same surface, so the images cannot tell them apart."""
+    c, E = _principal_frame(points)
+    tree = cKDTree(points)
+    out = []
+    for k in range(3):
+        S = np.eye(4)
+        S[:3, :3] = E @ np.diag(np.where(np.arange(3) == k, 1.0, -1.0)) @ E.T
+        S[:3, 3] = c - S[:3, :3] @ c
+        if tree.query(points @ S[:3, :3].T + S[:3, 3])[0].mean() <= tolerance:
+            out.append(S)
     return out
 
 
@@ -332,6 +353,9 @@ class Tracker:
         Ts = np.full((n, 4, 4), np.nan)
         Ts[ref] = np.eye(4)
         reach = WIDE_FACTOR * ICP_COARSE_VOXELS * self.voxel
+        # a symmetric part registers turned over as well as not (a flat lid at rest): of a pose
+        # and its symmetric twins, the one nearest a guess (constant velocity, or at rest) is kept
+        twins = [np.eye(4)] + symmetries(sample, ICP_FINE_VOXELS * self.voxel)
         sides: list[tuple[list[np.ndarray], list[int]]] = []
         for direction in (1, -1):
             solved, steps = [np.eye(4)], [ref]
@@ -347,6 +371,7 @@ class Tracker:
                 s += direction
                 if T is None:
                     continue
+                T = min((T @ S for S in twins), key=lambda X: min(displacement(X, g, sample) for g in guesses))
                 Ts[s - direction] = T
                 solved.append(T)
                 steps.append(s - direction)

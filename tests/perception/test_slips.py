@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from kinemaforge_opt.perception.track import Proposal, Tracker, _comoving, displacement, join, jump
+from kinemaforge_opt.perception.track import Proposal, Tracker, _comoving, displacement, join, jump, symmetries
 
 RNG = np.random.default_rng(0)
 # a drawer-sized box surface: 40 x 30 x 15 cm, points on its faces
@@ -137,3 +137,58 @@ def test_tracking_keeps_a_lid_that_turns_back_at_the_reference_and_slams_shut():
     truth = _relative([_pose(rotvec=(a, 0.0, 0.0), about=about) for a in angles], 4)
     Ts = _Scripted(truth).track("p0", 4, BOX).Ts_delta
     np.testing.assert_allclose(Ts, np.stack(truth), atol=1e-12)
+
+
+def test_a_lid_slammed_shut_and_then_seen_turned_over_every_other_step_keeps_its_rest_pose():
+    """A lid slammed shut onto its base, then at rest; the flat lid registers turned over about
+    its own long axis at every other step (a constant half-turn "velocity" that each next pose
+    continues).  The turned-over steps are unobserved, the rest pose kept."""
+    about = np.array([0.0, 0.15, 0.0])
+    angles = np.radians([60.0, 45.0, 30.0, 15.0, 0.0, 79.0, 79.0, 79.0, 79.0, 79.0, 79.0, 79.0])
+    truth = _relative([_pose(rotvec=(a, 0.0, 0.0), about=about) for a in angles], 3)
+    script = list(truth)
+    centre = truth[5][:3, :3] @ BOX.mean(axis=0) + truth[5][:3, 3]
+    for s in (6, 8, 10):
+        script[s] = _pose(rotvec=(np.pi, 0.0, 0.0), about=centre) @ truth[s]
+    Ts = _Scripted(script).track("p0", 3, BOX).Ts_delta
+    assert np.isnan(Ts[[6, 8, 10]]).all()
+    for s in (0, 1, 2, 3, 4, 5, 7, 9, 11):
+        np.testing.assert_allclose(Ts[s], truth[s], atol=1e-12)
+
+
+def _plate(flange: bool = False) -> np.ndarray:
+    """A 24 x 18 cm plate sampled on a 6 mm grid (a voxelised lid, fewer points than the tracker
+    samples), optionally with a 6 cm
+    flange along one long edge (a drawer front with its side wall: no half-turn maps it onto
+    itself)."""
+    g = np.arange(0.0, 0.24, 0.006)
+    x, y = np.meshgrid(g, g[g < 0.18])
+    pts = np.c_[x.ravel(), y.ravel(), np.zeros(x.size)]
+    if flange:
+        fx, fz = np.meshgrid(g, np.arange(0.006, 0.06, 0.006))
+        pts = np.vstack([pts, np.c_[fx.ravel(), np.zeros(fx.size), fz.ravel()]])
+    return pts
+
+
+def test_a_plate_has_three_half_turn_symmetries_a_plate_with_a_flange_none():
+    plate = _plate()
+    syms = symmetries(plate, 1.5 * 0.006)
+    assert len(syms) == 3
+    tree_check = plate.mean(axis=0)
+    for S in syms:  # each is a half-turn about an axis through the centre
+        assert abs(np.trace(S[:3, :3]) + 1.0) < 1e-9
+        np.testing.assert_allclose(S[:3, :3] @ tree_check + S[:3, 3], tree_check, atol=1e-12)
+    assert symmetries(_plate(flange=True), 1.5 * 0.006) == []
+
+
+def test_tracking_keeps_the_twin_of_a_symmetric_part_nearest_the_motion():
+    """A flat lid opened and slammed shut, registered turned over (a symmetry of the plate) at
+    every other step while it rests: the track keeps the pose that continues the motion."""
+    lid = _plate()
+    about = np.array([0.0, 0.2, 0.0])
+    angles = np.radians([60.0, 45.0, 30.0, 15.0, 0.0, 79.0, 79.0, 79.0, 79.0, 79.0, 79.0, 79.0])
+    truth = _relative([_pose(rotvec=(a, 0.0, 0.0), about=about) for a in angles], 3)
+    flip = symmetries(lid, 1.5 * 0.006)[0]
+    script = [T @ flip if s in (6, 8, 10) else T for s, T in enumerate(truth)]
+    Ts = _Scripted(script).track("p0", 3, lid).Ts_delta
+    np.testing.assert_allclose(Ts, np.stack(truth), atol=1e-9)
