@@ -49,6 +49,19 @@ The environment planes (floor, back wall) are never grown into: the floor next t
 also slides along itself under the door's rotation or a drawer's pull, and wherever the voxel is
 coarser than the gap between part and floor (a 2.3 cm voxel at 160×120 bridges a door's 2 cm
 clearance) the tie would carry the growth over the whole floor.
+
+Fragments: a piece of a part that slides along itself (a drawer's side wall or floor: a flat
+surface moving in its own plane) or hides in the body gives ICP and the free-space test little
+grip, so its track lags, stays put or drifts while the part moves, and it would pass as a joint
+of its own.  After refinement a proposal is *explained* by another when that one's motion,
+applied to its points, puts them nowhere the images contradict: at every step both observe (and
+they share COMOVING_SHARE of the proposal's observed steps) at most MAX_VIOLATED_SHARE of the
+points are seen through and most of the judged ones are consistent — the bound a tracked pose
+must meet (:func:`acceptable`) without the judged-share floor (a drawer shut in the body is not
+seen at all).  One body with one motion is the simpler explanation when the images cannot tell
+the two motions apart, so the proposal's points join that part (:func:`absorb`); of several
+parts the one whose motion the images confirm most is taken.  A second drawer moving at other
+times puts the points in the air in front of the body (seen through) and is no explanation.
 """
 
 from __future__ import annotations
@@ -514,7 +527,69 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
             else:  # a disconnected piece of a tracked part (a drawer's floor behind its front), or
                 # the part itself where its track was cut (a slip)
                 proposals[k] = join(proposals[k], new, a)
-    return refine(tracker, proposals) if proposals else proposals
+    return merge_fragments(tracker, refine(tracker, proposals)) if proposals else proposals
+
+
+def _common_anchor(p: Proposal, q: Proposal) -> tuple[np.ndarray, int | None]:
+    """(steps both observe, the one nearest ``p``'s reference or None when there is none)."""
+    common = np.flatnonzero(np.isfinite(p.Ts_delta[:, 0, 0]) & np.isfinite(q.Ts_delta[:, 0, 0]))
+    return common, (int(common[np.argmin(np.abs(common - p.ref))]) if common.size else None)
+
+
+def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, steps: np.ndarray) -> float | None:
+    """Mean share of (N, 3) world points at step ``anchor``, carried by ``by``'s motion to each
+    of ``steps``, that the images confirm minus those they see through; None when at some step
+    the images contradict it (over MAX_VIOLATED_SHARE seen through, or fewer than
+    MIN_CONSISTENT_SHARE of the judged ones consistent: module doc, fragments)."""
+    total = 0.0
+    for s in steps:
+        D = by.Ts_delta[s] @ np.linalg.inv(by.Ts_delta[anchor])
+        cons, viol = tracker.verify(points @ D[:3, :3].T + D[:3, 3], int(s))
+        if viol > MAX_VIOLATED_SHARE or cons < MIN_CONSISTENT_SHARE * (cons + viol):
+            return None
+        total += cons - viol
+    return total / len(steps)
+
+
+def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) -> tuple[int | None, int | None]:
+    """(index of the proposal whose motion explains ``frag``'s points best, anchor step) or
+    (None, None) (module doc, fragments)."""
+    rng = np.random.default_rng(0)
+    x = frag.points if len(frag.points) <= MAX_TRACK_POINTS else frag.points[rng.choice(len(frag.points), MAX_TRACK_POINTS, replace=False)]
+    observed = np.isfinite(frag.Ts_delta[:, 0, 0]).sum()
+    best, best_support, best_anchor = None, -np.inf, None
+    for k, p in enumerate(proposals):
+        if p is frag:
+            continue
+        common, a = _common_anchor(frag, p)
+        if common.size < max(COMOVING_SHARE * observed, 1):
+            continue
+        T = frag.Ts_delta[a]
+        sup = support(tracker, x @ T[:3, :3].T + T[:3, 3], p, a, common)
+        if sup is not None and sup > best_support:
+            best, best_support, best_anchor = k, sup, a
+    return best, best_anchor
+
+
+def absorb(p: Proposal, frag: Proposal, anchor: int) -> Proposal:
+    """``p`` with ``frag``'s points, carried to ``p``'s reference through the ``anchor`` step both
+    observe; ``p``'s motion unchanged (the fragment's own track is the one not trusted)."""
+    T = np.linalg.inv(p.Ts_delta[anchor]) @ frag.Ts_delta[anchor]
+    return Proposal(p.name, p.ref, np.concatenate([p.points, frag.points @ T[:3, :3].T + T[:3, 3]]), p.Ts_delta)
+
+
+def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
+    """The proposals with every fragment absorbed into the part whose motion explains it
+    (:func:`explained_by`), smallest proposal first (a part's large front is explained by no
+    fragment's lagging track)."""
+    out = list(proposals)
+    for name in [p.name for p in sorted(proposals, key=lambda p: len(p.points))]:
+        frag = next(p for p in out if p.name == name)
+        k, a = explained_by(tracker, frag, out)
+        if k is not None:
+            out[k] = absorb(out[k], frag, a)
+            out = [p for p in out if p is not frag]
+    return out
 
 
 def join(p: Proposal, new: Proposal, anchor: int) -> Proposal:
