@@ -54,9 +54,10 @@ Fragments: a piece of a part that slides along itself (a drawer's side wall or f
 surface moving in its own plane) or hides in the body gives ICP and the free-space test little
 grip, so its track lags, stays put or drifts while the part moves, and it would pass as a joint
 of its own.  After refinement a proposal is *explained* by another when that one's motion,
-applied to its points, puts them nowhere the images contradict: at every step both observe (and
-they share COMOVING_SHARE of the proposal's observed steps) at most MAX_VIOLATED_SHARE of the
-points are seen through and most of the judged ones are consistent — the bound a tracked pose
+applied to its points, puts them nowhere the images contradict: at COMOVING_SHARE of the steps
+both observe (and they share COMOVING_SHARE of the proposal's observed steps; a track may fail at
+a few) at most MAX_VIOLATED_SHARE of the points are seen through and most of the judged ones are
+consistent — the bound a tracked pose
 must meet (:func:`acceptable`) without the judged-share floor (a drawer shut in the body is not
 seen at all).  One body with one motion is the simpler explanation when the images cannot tell
 the two motions apart, so the proposal's points join that part (:func:`absorb`); of several
@@ -536,28 +537,34 @@ def _common_anchor(p: Proposal, q: Proposal) -> tuple[np.ndarray, int | None]:
     return common, (int(common[np.argmin(np.abs(common - p.ref))]) if common.size else None)
 
 
-def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, steps: np.ndarray) -> float | None:
-    """Mean share of (N, 3) world points at step ``anchor``, carried by ``by``'s motion to each
-    of ``steps``, that the images confirm minus those they see through; None when at some step
-    the images contradict it (over MAX_VIOLATED_SHARE seen through, or fewer than
-    MIN_CONSISTENT_SHARE of the judged ones consistent: module doc, fragments)."""
-    total = 0.0
+def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
+            steps: np.ndarray) -> tuple[float, list[int]] | None:
+    """(mean share of (N, 3) world points at step ``anchor``, carried by ``by``'s motion to each
+    of ``steps``, that the images confirm minus those they see through; the steps where the
+    images contradict it: over MAX_VIOLATED_SHARE seen through, or fewer than
+    MIN_CONSISTENT_SHARE of the judged ones consistent), or None when those are more than
+    1 − COMOVING_SHARE of the steps (module doc, fragments: ``by``'s own track may fail at a few
+    steps, as in :func:`_comoving`)."""
+    total, contradicted = 0.0, []
     for s in steps:
         D = by.Ts_delta[s] @ np.linalg.inv(by.Ts_delta[anchor])
         cons, viol = tracker.verify(points @ D[:3, :3].T + D[:3, 3], int(s))
         if viol > MAX_VIOLATED_SHARE or cons < MIN_CONSISTENT_SHARE * (cons + viol):
-            return None
+            contradicted.append(int(s))
+            if len(contradicted) > (1.0 - COMOVING_SHARE) * len(steps):
+                return None
         total += cons - viol
-    return total / len(steps)
+    return total / len(steps), contradicted
 
 
-def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) -> tuple[int | None, int | None]:
-    """(index of the proposal whose motion explains ``frag``'s points best, anchor step) or
-    (None, None) (module doc, fragments)."""
+def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) -> tuple[int | None, int | None, list[int]]:
+    """(index of the proposal whose motion explains ``frag``'s points best, anchor step, the
+    steps where the images contradict that motion for them) or (None, None, []) (module doc,
+    fragments)."""
     rng = np.random.default_rng(0)
     x = frag.points if len(frag.points) <= MAX_TRACK_POINTS else frag.points[rng.choice(len(frag.points), MAX_TRACK_POINTS, replace=False)]
     observed = np.isfinite(frag.Ts_delta[:, 0, 0]).sum()
-    best, best_support, best_anchor = None, -np.inf, None
+    best, best_support, best_anchor, failed = None, -np.inf, None, []
     for k, p in enumerate(proposals):
         if p is frag:
             continue
@@ -566,16 +573,21 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
             continue
         T = frag.Ts_delta[a]
         sup = support(tracker, x @ T[:3, :3].T + T[:3, 3], p, a, common)
-        if sup is not None and sup > best_support:
-            best, best_support, best_anchor = k, sup, a
-    return best, best_anchor
+        if sup is not None and sup[0] > best_support:
+            best, (best_support, failed), best_anchor = k, sup, a
+    return best, best_anchor, failed
 
 
-def absorb(p: Proposal, frag: Proposal, anchor: int) -> Proposal:
+def absorb(p: Proposal, frag: Proposal, anchor: int, failed: list[int] = ()) -> Proposal:
     """``p`` with ``frag``'s points, carried to ``p``'s reference through the ``anchor`` step both
-    observe; ``p``'s motion unchanged (the fragment's own track is the one not trusted)."""
+    observe; ``p``'s motion kept (the fragment's own track is the one not trusted) except at the
+    ``failed`` steps, where it put the fragment's points where the images contradict them: there
+    ``p``'s track failed, and ``p`` is unobserved (not at its reference, where its motion is the
+    identity, nor at the anchor, where the fragment's own pose is what was judged)."""
     T = np.linalg.inv(p.Ts_delta[anchor]) @ frag.Ts_delta[anchor]
-    return Proposal(p.name, p.ref, np.concatenate([p.points, frag.points @ T[:3, :3].T + T[:3, 3]]), p.Ts_delta)
+    Ts = p.Ts_delta.copy()
+    Ts[[s for s in failed if s not in (p.ref, anchor)]] = np.nan
+    return Proposal(p.name, p.ref, np.concatenate([p.points, frag.points @ T[:3, :3].T + T[:3, 3]]), Ts)
 
 
 def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
@@ -585,9 +597,9 @@ def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposa
     out = list(proposals)
     for name in [p.name for p in sorted(proposals, key=lambda p: len(p.points))]:
         frag = next(p for p in out if p.name == name)
-        k, a = explained_by(tracker, frag, out)
+        k, a, failed = explained_by(tracker, frag, out)
         if k is not None:
-            out[k] = absorb(out[k], frag, a)
+            out[k] = absorb(out[k], frag, a, failed)
             out = [p for p in out if p is not frag]
     return out
 
