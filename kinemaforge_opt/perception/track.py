@@ -54,12 +54,13 @@ Fragments: a piece of a part that slides along itself (a drawer's side wall or f
 surface moving in its own plane) or hides in the body gives ICP and the free-space test little
 grip, so its track lags, stays put or drifts while the part moves, and it would pass as a joint
 of its own.  After refinement a proposal is *explained* by another when that one's motion,
-applied to its points, puts them nowhere the images contradict: at COMOVING_SHARE of the steps
-both observe (and they share COMOVING_SHARE of the proposal's observed steps; a track may fail at
-a few) at most MAX_VIOLATED_SHARE of the points are seen through and most of the judged ones are
-consistent — the bound a tracked pose
+applied to its points, puts them nowhere the images contradict: at every step both observe (and
+they share COMOVING_SHARE of the proposal's observed steps) at most MAX_VIOLATED_SHARE of the
+points are seen through and most of the judged ones are consistent — the bound a tracked pose
 must meet (:func:`acceptable`) without the judged-share floor (a drawer shut in the body is not
-seen at all).  One body with one motion is the simpler explanation when the images cannot tell
+seen at all).  A step where the other part's pose fails that test for its own points is its
+track's failure (a glitch the growth exposed), not a contradiction, when such steps are at most
+1 − COMOVING_SHARE of them; they are unobserved after the merge.  One body with one motion is the simpler explanation when the images cannot tell
 the two motions apart, so the proposal's points join that part (:func:`absorb`); of several
 parts the one whose motion the images confirm most is taken.  A second drawer moving at other
 times puts the points in the air in front of the body (seen through) and is no explanation.
@@ -540,29 +541,41 @@ def _common_anchor(p: Proposal, q: Proposal) -> tuple[np.ndarray, int | None]:
 def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
             steps: np.ndarray) -> tuple[float, list[int]] | None:
     """(mean share of (N, 3) world points at step ``anchor``, carried by ``by``'s motion to each
-    of ``steps``, that the images confirm minus those they see through; the steps where the
-    images contradict it: over MAX_VIOLATED_SHARE seen through, or fewer than
-    MIN_CONSISTENT_SHARE of the judged ones consistent), or None when those are more than
-    1 − COMOVING_SHARE of the steps (module doc, fragments: ``by``'s own track may fail at a few
-    steps, as in :func:`_comoving`)."""
-    total, contradicted = 0.0, []
+    of ``steps``, that the images confirm minus those they see through; the steps where ``by``'s
+    track failed), or None when the images contradict the carried points (over
+    MAX_VIOLATED_SHARE seen through, or fewer than MIN_CONSISTENT_SHARE of the judged ones
+    consistent) at a step where ``by``'s pose is acceptable for its own points, or at more than
+    1 − COMOVING_SHARE of the steps (module doc, fragments: a contradiction at a step where
+    ``by``'s own pose fails the images is its track's failure, not the fragment's, when it is
+    one of a few)."""
+    total, failed = 0.0, []
+    own = _sample(by.points)
     for s in steps:
         D = by.Ts_delta[s] @ np.linalg.inv(by.Ts_delta[anchor])
         cons, viol = tracker.verify(points @ D[:3, :3].T + D[:3, 3], int(s))
         if viol > MAX_VIOLATED_SHARE or cons < MIN_CONSISTENT_SHARE * (cons + viol):
-            contradicted.append(int(s))
-            if len(contradicted) > (1.0 - COMOVING_SHARE) * len(steps):
+            T = by.Ts_delta[s]
+            if acceptable(*tracker.verify(own @ T[:3, :3].T + T[:3, 3], int(s))):
+                return None
+            failed.append(int(s))
+            if len(failed) > (1.0 - COMOVING_SHARE) * len(steps):
                 return None
         total += cons - viol
-    return total / len(steps), contradicted
+    return total / len(steps), failed
+
+
+def _sample(points: np.ndarray) -> np.ndarray:
+    """At most MAX_TRACK_POINTS of (N, 3) points (a fixed random subset, as tracking uses)."""
+    if len(points) <= MAX_TRACK_POINTS:
+        return points
+    return points[np.random.default_rng(0).choice(len(points), MAX_TRACK_POINTS, replace=False)]
 
 
 def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) -> tuple[int | None, int | None, list[int]]:
     """(index of the proposal whose motion explains ``frag``'s points best, anchor step, the
     steps where the images contradict that motion for them) or (None, None, []) (module doc,
     fragments)."""
-    rng = np.random.default_rng(0)
-    x = frag.points if len(frag.points) <= MAX_TRACK_POINTS else frag.points[rng.choice(len(frag.points), MAX_TRACK_POINTS, replace=False)]
+    x = _sample(frag.points)
     observed = np.isfinite(frag.Ts_delta[:, 0, 0]).sum()
     best, best_support, best_anchor, failed = None, -np.inf, None, []
     for k, p in enumerate(proposals):

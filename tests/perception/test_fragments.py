@@ -112,3 +112,16 @@ def test_a_part_track_that_fails_at_one_step_still_explains_its_wall_and_loses_t
     assert np.isnan(merged[0].Ts_delta[6]).all()
     keep = np.arange(STEPS) != 6
     np.testing.assert_array_equal(merged[0].Ts_delta[keep], front_a.Ts_delta[keep])
+
+
+def test_a_drawer_that_differs_at_two_steps_only_is_not_absorbed_by_another():
+    """Drawers A and B pulled together over steps 0-8, then B alone 6 cm further at each of steps
+    14 and 15: A's well-tracked motion puts B's front in the air at those two steps (2 of 16,
+    within a track's allowance for failures), which no failure of A's track excuses."""
+    ya = _stroke(0)
+    yb = ya + 0.06 * np.clip(np.arange(STEPS) - 13, 0, 2)
+    fa, fb = _drawer(0.05)[0], _drawer(0.3)[0]
+    oracle = _Oracle([np.concatenate([fa - [0.0, a, 0.0], fb - [0.0, b, 0.0]]) for a, b in zip(ya, yb)])
+    front_a = Proposal("a", 4, fa - [0.0, ya[4], 0.0], _motion(ya, 4))
+    front_b = Proposal("b", 4, fb - [0.0, yb[4], 0.0], _motion(yb, 4))
+    assert explained_by(oracle, front_b, [front_a, front_b]) == (None, None, [])
