@@ -58,12 +58,13 @@ applied to its points, puts them nowhere the images contradict: at every step bo
 they share COMOVING_SHARE of the proposal's observed steps) at most MAX_VIOLATED_SHARE of the
 points are seen through and most of the judged ones are consistent — the bound a tracked pose
 must meet (:func:`acceptable`) without the judged-share floor (a drawer shut in the body is not
-seen at all).  A step where the other part's pose fails that test for its own points is its
-track's failure (a glitch the growth exposed), not a contradiction, when such steps are at most
-1 − COMOVING_SHARE of them; they are unobserved after the merge.  One body with one motion is the simpler explanation when the images cannot tell
-the two motions apart, so the proposal's points join that part (:func:`absorb`); of several
-parts the one whose motion the images confirm most is taken.  A second drawer moving at other
-times puts the points in the air in front of the body (seen through) and is no explanation.
+seen at all).  A step where the other part's pose fails that test for its own points is that
+track's failure (a glitch its grown points expose), not a contradiction, as long as such steps
+are at most 1 − COMOVING_SHARE of them; they are unobserved after the merge.  One body with one
+motion is the simpler explanation when the images cannot tell the two motions apart, so the
+proposal's points join that part (:func:`absorb`); of several parts the one whose motion the
+images confirm most is taken.  A second drawer moving at other times puts the points in the air
+in front of the body (seen through) and is no explanation.
 """
 
 from __future__ import annotations
@@ -573,7 +574,7 @@ def _sample(points: np.ndarray) -> np.ndarray:
 
 def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) -> tuple[int | None, int | None, list[int]]:
     """(index of the proposal whose motion explains ``frag``'s points best, anchor step, the
-    steps where the images contradict that motion for them) or (None, None, []) (module doc,
+    steps where that proposal's track failed: :func:`support`) or (None, None, []) (module doc,
     fragments)."""
     x = _sample(frag.points)
     observed = np.isfinite(frag.Ts_delta[:, 0, 0]).sum()
