@@ -49,6 +49,22 @@ The environment planes (floor, back wall) are never grown into: the floor next t
 also slides along itself under the door's rotation or a drawer's pull, and wherever the voxel is
 coarser than the gap between part and floor (a 2.3 cm voxel at 160×120 bridges a door's 2 cm
 clearance) the tie would carry the growth over the whole floor.
+
+Fragments: a piece of a part that slides along itself (a drawer's side wall or floor: a flat
+surface moving in its own plane) or hides in the body gives ICP and the free-space test little
+grip, so its track lags, stays put or drifts while the part moves, and it would pass as a joint
+of its own.  After refinement a proposal is *explained* by another when that one's motion,
+applied to its points, puts them nowhere the images contradict: at every step both observe (and
+they share COMOVING_SHARE of the proposal's observed steps) at most MAX_VIOLATED_SHARE of the
+points are seen through and most of the judged ones are consistent — the bound a tracked pose
+must meet (:func:`acceptable`) without the judged-share floor (a drawer shut in the body is not
+seen at all).  A step where the other part's pose fails that test for its own points is that
+track's failure (a glitch its grown points expose), not a contradiction, as long as such steps
+are at most 1 − COMOVING_SHARE of them; they are unobserved after the merge.  One body with one
+motion is the simpler explanation when the images cannot tell the two motions apart, so the
+proposal's points join that part (:func:`absorb`); of several parts the one whose motion the
+images confirm most is taken.  A second drawer moving at other times puts the points in the air
+in front of the body (seen through) and is no explanation.
 """
 
 from __future__ import annotations
@@ -539,7 +555,92 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
             else:  # a disconnected piece of a tracked part (a drawer's floor behind its front), or
                 # the part itself where its track was cut (a slip)
                 proposals[k] = join(proposals[k], new, a)
-    return refine(tracker, proposals) if proposals else proposals
+    return merge_fragments(tracker, refine(tracker, proposals)) if proposals else proposals
+
+
+def _common_anchor(p: Proposal, q: Proposal) -> tuple[np.ndarray, int | None]:
+    """(steps both observe, the one nearest ``p``'s reference or None when there is none)."""
+    common = np.flatnonzero(np.isfinite(p.Ts_delta[:, 0, 0]) & np.isfinite(q.Ts_delta[:, 0, 0]))
+    return common, (int(common[np.argmin(np.abs(common - p.ref))]) if common.size else None)
+
+
+def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
+            steps: np.ndarray) -> tuple[float, list[int]] | None:
+    """(mean share of (N, 3) world points at step ``anchor``, carried by ``by``'s motion to each
+    of ``steps``, that the images confirm minus those they see through; the steps where ``by``'s
+    track failed), or None when the images contradict the carried points (over
+    MAX_VIOLATED_SHARE seen through, or fewer than MIN_CONSISTENT_SHARE of the judged ones
+    consistent) at a step where ``by``'s pose is acceptable for its own points, or at more than
+    1 − COMOVING_SHARE of the steps (module doc, fragments: a contradiction at a step where
+    ``by``'s own pose fails the images is its track's failure, not the fragment's, when it is
+    one of a few)."""
+    total, failed = 0.0, []
+    own = _sample(by.points)
+    for s in steps:
+        D = by.Ts_delta[s] @ np.linalg.inv(by.Ts_delta[anchor])
+        cons, viol = tracker.verify(points @ D[:3, :3].T + D[:3, 3], int(s))
+        if viol > MAX_VIOLATED_SHARE or cons < MIN_CONSISTENT_SHARE * (cons + viol):
+            T = by.Ts_delta[s]
+            if acceptable(*tracker.verify(own @ T[:3, :3].T + T[:3, 3], int(s))):
+                return None
+            failed.append(int(s))
+            if len(failed) > (1.0 - COMOVING_SHARE) * len(steps):
+                return None
+        total += cons - viol
+    return total / len(steps), failed
+
+
+def _sample(points: np.ndarray) -> np.ndarray:
+    """At most MAX_TRACK_POINTS of (N, 3) points (a fixed random subset, as tracking uses)."""
+    if len(points) <= MAX_TRACK_POINTS:
+        return points
+    return points[np.random.default_rng(0).choice(len(points), MAX_TRACK_POINTS, replace=False)]
+
+
+def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) -> tuple[int | None, int | None, list[int]]:
+    """(index of the proposal whose motion explains ``frag``'s points best, anchor step, the
+    steps where that proposal's track failed: :func:`support`) or (None, None, []) (module doc,
+    fragments)."""
+    x = _sample(frag.points)
+    observed = np.isfinite(frag.Ts_delta[:, 0, 0]).sum()
+    best, best_support, best_anchor, failed = None, -np.inf, None, []
+    for k, p in enumerate(proposals):
+        if p is frag:
+            continue
+        common, a = _common_anchor(frag, p)
+        if common.size < max(COMOVING_SHARE * observed, 1):
+            continue
+        T = frag.Ts_delta[a]
+        sup = support(tracker, x @ T[:3, :3].T + T[:3, 3], p, a, common)
+        if sup is not None and sup[0] > best_support:
+            best, (best_support, failed), best_anchor = k, sup, a
+    return best, best_anchor, failed
+
+
+def absorb(p: Proposal, frag: Proposal, anchor: int, failed: list[int] = ()) -> Proposal:
+    """``p`` with ``frag``'s points, carried to ``p``'s reference through the ``anchor`` step both
+    observe; ``p``'s motion kept (the fragment's own track is the one not trusted) except at the
+    ``failed`` steps, where it put the fragment's points where the images contradict them: there
+    ``p``'s track failed, and ``p`` is unobserved (not at its reference, where its motion is the
+    identity, nor at the anchor, where the fragment's own pose is what was judged)."""
+    T = np.linalg.inv(p.Ts_delta[anchor]) @ frag.Ts_delta[anchor]
+    Ts = p.Ts_delta.copy()
+    Ts[[s for s in failed if s not in (p.ref, anchor)]] = np.nan
+    return Proposal(p.name, p.ref, np.concatenate([p.points, frag.points @ T[:3, :3].T + T[:3, 3]]), Ts)
+
+
+def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
+    """The proposals with every fragment absorbed into the part whose motion explains it
+    (:func:`explained_by`), smallest proposal first (a part's large front is explained by no
+    fragment's lagging track)."""
+    out = list(proposals)
+    for name in [p.name for p in sorted(proposals, key=lambda p: len(p.points))]:
+        frag = next(p for p in out if p.name == name)
+        k, a, failed = explained_by(tracker, frag, out)
+        if k is not None:
+            out[k] = absorb(out[k], frag, a, failed)
+            out = [p for p in out if p is not frag]
+    return out
 
 
 def join(p: Proposal, new: Proposal, anchor: int) -> Proposal:
