@@ -148,6 +148,13 @@ def displacement(A: np.ndarray, B: np.ndarray, points: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
 
 
+def _sample(points: np.ndarray) -> np.ndarray:
+    """At most MAX_TRACK_POINTS of (N, 3) points (a fixed random subset, as tracking uses)."""
+    if len(points) <= MAX_TRACK_POINTS:
+        return points
+    return points[np.random.default_rng(0).choice(len(points), MAX_TRACK_POINTS, replace=False)]
+
+
 def _predict(poses: list[np.ndarray], ahead: int = 1) -> np.ndarray:
     """Constant-velocity extrapolation ``ahead`` steps past the last of (4, 4) ``poses`` (the
     last pose itself when there is only one)."""
@@ -364,8 +371,7 @@ class Tracker:
         """Track (N, 3) world points of step ``ref`` through every step, then grow the
         proposal (module doc)."""
         n = len(self.clouds)
-        rng = np.random.default_rng(0)
-        sample = points if len(points) <= MAX_TRACK_POINTS else points[rng.choice(len(points), MAX_TRACK_POINTS, replace=False)]
+        sample = _sample(points)
         Ts = np.full((n, 4, 4), np.nan)
         Ts[ref] = np.eye(4)
         reach = WIDE_FACTOR * ICP_COARSE_VOXELS * self.voxel
@@ -590,13 +596,6 @@ def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
     return total / len(steps), failed
 
 
-def _sample(points: np.ndarray) -> np.ndarray:
-    """At most MAX_TRACK_POINTS of (N, 3) points (a fixed random subset, as tracking uses)."""
-    if len(points) <= MAX_TRACK_POINTS:
-        return points
-    return points[np.random.default_rng(0).choice(len(points), MAX_TRACK_POINTS, replace=False)]
-
-
 def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) -> tuple[int | None, int | None, list[int]]:
     """(index of the proposal whose motion explains ``frag``'s points best, anchor step, the
     steps where that proposal's track failed: :func:`support`) or (None, None, []) (module doc,
@@ -623,10 +622,9 @@ def absorb(p: Proposal, frag: Proposal, anchor: int, failed: list[int] = ()) -> 
     ``failed`` steps, where it put the fragment's points where the images contradict them: there
     ``p``'s track failed, and ``p`` is unobserved (not at its reference, where its motion is the
     identity, nor at the anchor, where the fragment's own pose is what was judged)."""
-    T = np.linalg.inv(p.Ts_delta[anchor]) @ frag.Ts_delta[anchor]
     Ts = p.Ts_delta.copy()
     Ts[[s for s in failed if s not in (p.ref, anchor)]] = np.nan
-    return Proposal(p.name, p.ref, np.concatenate([p.points, frag.points @ T[:3, :3].T + T[:3, 3]]), Ts)
+    return Proposal(p.name, p.ref, _points_with(p, frag, anchor), Ts)
 
 
 def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
@@ -647,11 +645,17 @@ def join(p: Proposal, new: Proposal, anchor: int) -> Proposal:
     """``p`` with ``new``'s points (carried to ``p``'s reference through the ``anchor`` step both
     observe) and, at the steps ``p`` lacks and ``new`` observes, ``new``'s motion continued from
     ``p``'s pose at the anchor."""
-    T = np.linalg.inv(p.Ts_delta[anchor]) @ new.Ts_delta[anchor]  # new's reference -> p's
     Ts = p.Ts_delta.copy()
     gap = ~np.isfinite(Ts[:, 0, 0]) & np.isfinite(new.Ts_delta[:, 0, 0])
     Ts[gap] = new.Ts_delta[gap] @ np.linalg.inv(new.Ts_delta[anchor]) @ p.Ts_delta[anchor]
-    return Proposal(p.name, p.ref, np.concatenate([p.points, new.points @ T[:3, :3].T + T[:3, 3]]), Ts)
+    return Proposal(p.name, p.ref, _points_with(p, new, anchor), Ts)
+
+
+def _points_with(p: Proposal, other: Proposal, anchor: int) -> np.ndarray:
+    """``p``'s points and ``other``'s, carried from ``other``'s reference to ``p``'s through the
+    ``anchor`` step both observe (world points at ``p``'s reference, (N + M, 3))."""
+    T = np.linalg.inv(p.Ts_delta[anchor]) @ other.Ts_delta[anchor]  # other's reference -> p's
+    return np.concatenate([p.points, other.points @ T[:3, :3].T + T[:3, 3]])
 
 
 def _comoving(new: Proposal, proposals: list[Proposal], tolerance: float) -> tuple[int | None, int | None]:
@@ -661,12 +665,10 @@ def _comoving(new: Proposal, proposals: list[Proposal], tolerance: float) -> tup
     (RMS) of their own track at COMOVING_SHARE of the steps both observe (a new track may fail at
     a few steps where its piece is hidden)."""
     best, best_share, anchor = None, 0.0, None
-    seen = np.isfinite(new.Ts_delta[:, 0, 0])
     for k, p in enumerate(proposals):
-        common = np.flatnonzero(seen & np.isfinite(p.Ts_delta[:, 0, 0]))
-        if common.size == 0:
+        common, a = _common_anchor(new, p)
+        if a is None:
             continue
-        a = int(common[np.argmin(np.abs(common - new.ref))])
         x = new.points @ new.Ts_delta[a][:3, :3].T + new.Ts_delta[a][:3, 3]  # new's points at a
         agree = 0
         for s in common:
