@@ -54,6 +54,7 @@ from ..io.sequence import Wrenches
 from ..model import ArticulatedModel, JointLimits
 from ..physics.effects import EFFECTS
 from ..symbolic import build_dynamics
+from .inertial_scales import MIN_COM_SCALE, com_scale, has_axis_ratio, link_axis, scaled_inertial, scaled_parameters
 from .problem import Problem, Result
 from .structured_hessian import DenseTerms, lagrangian_hessian
 from .visual import Correspondences, SurfaceModel, correspond, surface_model, fixed_subsample, pseudo_huber, robust_value, z_vector
@@ -85,6 +86,8 @@ STOP_BAND = 0.02
 # kept for true 5.7 / 6.1 kg; kept: 8.3 / 6.2 kg, 1-s drift 0.062 -> 0.004 m).
 VIS_SLACK = 0.5
 HESSIANS = ("exact", "gauss_newton", "flat", "lbfgs")
+# Bounds of the mass and inertia ratios (the mesh's mass properties are a guess, not that bad).
+RATIO_BOUNDS = (MIN_COM_SCALE, 50.0)
 
 
 @dataclass(frozen=True)
@@ -184,8 +187,9 @@ class ScrewData:
 @dataclass
 class ScrewState:
     """Current estimate.  axes (n, 3) joint frame (unit), origins (n, 3) parent frame [m], pitches (n,)
-    [m/rad]; t (G,) grid [s], q (G, n), v (G, n) or None; damping, coulomb (n,); inertia_ratio
-    {link: ratio}."""
+    [m/rad]; t (G,) grid [s], q (G, n), v (G, n) or None; damping, coulomb (n,); mass_ratio
+    {link: ratio of mass and first moment to the mesh's}; inertia_ratio {link: ratio of the inertia
+    about the link's joint axis to the mesh's} (:mod:`.inertial_scales`)."""
 
     axes: np.ndarray
     origins: np.ndarray
@@ -196,6 +200,7 @@ class ScrewState:
     damping: np.ndarray
     coulomb: np.ndarray
     inertia_ratio: dict[str, float] = field(default_factory=dict)
+    mass_ratio: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, eq=False)
@@ -225,9 +230,13 @@ class ScrewResult:
     normalised defects, ``energy`` the soft penalty (× energy_weight) or, for the hard constraint,
     Σ (relative residual)² over the windows.  iterations: IPOPT iterations over all stages.
     success: every stage converged.  stages: per stage (name, iterations, success, seconds).
-    identified: which dynamic quantities were fitted.  notes: why a term was off (or cut short).
-    identifiability: per fitted dynamic parameter whether the data determine it
-    (:func:`dynamic_identifiability`); empty when none was fitted."""
+    fitted: the dynamic parameters the NLP fitted ("damping:<joint>", "coulomb:<joint>",
+    "mass_ratio:<link>", "inertia_ratio:<link>").  identified: those of them the data determine
+    (status "identified").  A damping or Coulomb coefficient the data do not determine is held at
+    the nominal (input model's) value and the rest re-fitted (stage ``full_refit``; notes say so);
+    a ratio the data do not determine stays near its prior (1, the mesh's).  notes: why a term was
+    off (or cut short).  identifiability: per fitted dynamic parameter whether the data determine
+    it (:func:`dynamic_identifiability`); empty when none was fitted."""
 
     model: ArticulatedModel
     q: np.ndarray
@@ -240,6 +249,7 @@ class ScrewResult:
     identified: tuple[str, ...]
     notes: tuple[str, ...]
     identifiability: dict = field(default_factory=dict)
+    fitted: tuple[str, ...] = ()
 
 
 # --- helpers ---------------------------------------------------------------------------------
@@ -288,9 +298,18 @@ def state_model(data: ScrewData, state: ScrewState) -> ArticulatedModel:
         model = model.with_joint(j.name, T_parent_joint=T, axis=state.axes[k] / np.linalg.norm(state.axes[k]),
                                  pitch=float(state.pitches[k]) if j.type == "helical" else 0.0,
                                  limits=limits, dynamics=dyn)
-    for link, r in state.inertia_ratio.items():
+    return with_ratios(model, data.model, state.mass_ratio, state.inertia_ratio)
+
+
+def with_ratios(model: ArticulatedModel, axes_from: ArticulatedModel, mass_ratio: dict[str, float],
+                inertia_ratio: dict[str, float]) -> ArticulatedModel:
+    """``model`` with each link's mass properties scaled by its ratios (:func:`scaled_inertial`),
+    the inertia ratio taken about the link's joint axis in ``axes_from`` (the model the NLP was
+    built on)."""
+    for link, r_m in mass_ratio.items():
         inert = model.link(link).inertial
-        model = model.with_link(link, inertial=dataclasses.replace(inert, mass=inert.mass * r, inertia=inert.inertia * r))
+        scaled = scaled_inertial(inert, link_axis(axes_from, link), r_m, inertia_ratio.get(link))
+        model = model.with_link(link, inertial=scaled)
     return model
 
 
@@ -465,10 +484,12 @@ def stop_free(times: np.ndarray, q: np.ndarray, t_grid: np.ndarray) -> np.ndarra
 
 
 def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewState,
-                        corr: dict[str, list[Correspondences]] | None, dense: bool) -> ScrewProblem:
+                        corr: dict[str, list[Correspondences]] | None, dense: bool,
+                        held: frozenset[str] = frozenset()) -> ScrewProblem:
     """Build the NLP around ``state`` with fixed correspondences ``corr`` (see module doc).
     ``dense``: states (q, v) on the collocation grid with the dynamics/energy terms as the options
-    say; else q on the frame grid and only ``vis``."""
+    say; else q on the frame grid and only ``vis``.  ``held``: damping / Coulomb variables
+    ("damping:<joint>") held at the state's value instead of fitted."""
     model = data.model
     n = model.nq
     joints = model.movable_joints
@@ -528,11 +549,20 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             pitch_of.append(theta_sx[dyn.parameter(f"{j.name}.pitch").slice])
         else:
             pitch_of.append(None)
-    ratios = {}
+    ratios = []  # names of the ratio variables (mass_ratio:<l>, inertia_ratio:<l>)
     for l in ratio_links:
-        r = prob.variable(f"inertia_ratio:{l}", 1, lower=0.02, upper=50.0, init=state.inertia_ratio.get(l, 1.0))
-        ratios[l] = r
-        theta_parts.append(r * ca.DM(dyn.parameter(f"{l}.inertia").nominal))
+        inertial, axis = model.link(l).inertial, link_axis(model, l)
+        r_m = prob.variable(f"mass_ratio:{l}", 1, lower=RATIO_BOUNDS[0], upper=RATIO_BOUNDS[1],
+                            init=state.mass_ratio.get(l, 1.0))
+        ratios.append(f"mass_ratio:{l}")
+        r_a = None
+        if has_axis_ratio(inertial, axis):
+            r_a = prob.variable(f"inertia_ratio:{l}", 1, lower=RATIO_BOUNDS[0], upper=RATIO_BOUNDS[1],
+                                init=state.inertia_ratio.get(l, 1.0))
+            ratios.append(f"inertia_ratio:{l}")
+            # the scaled body stays physical: its inertia about the centre of mass stays positive
+            prob.add_constraint(f"com_inertia_floor:{l}", com_scale(inertial, axis, r_m, r_a), MIN_COM_SCALE, np.inf)
+        theta_parts.append(ca.vertcat(*scaled_parameters(inertial, axis, r_m, r_a)))
     use_prior = bool(ratios) and 0 < options.inertia_prior_sigma < np.inf
     theta_mx = ca.vertcat(*theta_parts)
 
@@ -632,7 +662,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         phi_parts = []
         for name, values in (("damping", state.damping), ("coulomb", state.coulomb)):
             for k, j in enumerate(joints):
-                if fit_dyn:
+                if fit_dyn and f"{name}:{j.name}" not in held:
                     force_s = _force_scale(data, j, v_s[k], a_s[k])
                     sc = force_s / v_s[k] if name == "damping" else force_s
                     z = prob.variable(f"{name}:{j.name}", 1, lower=0.0, init=values[k] / sc)
@@ -661,7 +691,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
     prior_fn = None
     if use_dyn and use_prior:
         # ½ Σ (log r / σ)²: in the units of the other terms (each ≈ ½ χ²), added with the same weight
-        zr = [prob.symbol(f"inertia_ratio:{l}") for l in ratios]
+        zr = [prob.symbol(name) for name in ratios]
         terms["inertia_prior"] = 0.5 * ca.sumsqr(ca.log(ca.vertcat(*zr)) / options.inertia_prior_sigma)
     for name, expr in terms.items():
         if name == "energy_residual":  # reported, not minimised
@@ -739,10 +769,11 @@ def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
             origins[k] = vals[f"origin:{j.name}"]
         if f"pitch:{j.name}" in vals:
             pitches[k] = float(vals[f"pitch:{j.name}"][0])
-    ratio = dict(st.inertia_ratio)
+    ratios = {"mass_ratio": dict(st.mass_ratio), "inertia_ratio": dict(st.inertia_ratio)}
     for name, v in vals.items():
-        if name.startswith("inertia_ratio:"):
-            ratio[name.split(":", 1)[1]] = float(v[0])
+        kind, _, link = name.partition(":")
+        if kind in ratios:
+            ratios[kind][link] = float(v[0])
     if "x" in vals:
         q, v = vals["x"][:n].T, vals["x"][n:].T
     else:
@@ -753,12 +784,17 @@ def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
         spline, v_s, a_s = _rates(sp.data.times, st.q[cols])
         for k, j in enumerate(joints):
             fs = _force_scale(sp.data, j, v_s[k], a_s[k])
-            if f"damping:{j.name}" in vals:  # IPOPT may relax the bound 0 by ~1e-8: clip
+            # IPOPT may relax the bound 0 by ~1e-8: clip
+            if f"damping:{j.name}" in vals:
                 damping[k] = max(float(vals[f"damping:{j.name}"][0]) * fs / v_s[k], 0.0)
+            if f"coulomb:{j.name}" in vals:
                 coulomb[k] = max(float(vals[f"coulomb:{j.name}"][0]) * fs, 0.0)
-    return ScrewState(axes, origins, pitches, st.t.copy(), q, v, damping, coulomb, ratio)
+    return ScrewState(axes, origins, pitches, st.t.copy(), q, v, damping, coulomb, ratios["inertia_ratio"],
+                      ratios["mass_ratio"])
 
 
+DYNAMIC_PARAMETERS = ("damping:", "coulomb:", "mass_ratio:", "inertia_ratio:")
+RATIO_PARAMETERS = ("mass_ratio:", "inertia_ratio:")
 # A fitted damping / Coulomb coefficient counts as identified when its standard deviation is below
 # this fraction of its value (its 95 % interval then excludes 0 by ~2σ).
 IDENTIFIED_REL_STD = 0.5
@@ -775,8 +811,8 @@ def dynamic_identifiability(sp: ScrewProblem, res: Result) -> dict:
     Returns {name: {"value", "std", "relative_std", "status"}, "correlation": {joint: ρ(damping,
     Coulomb)}} in the NLP's variable units (damping and Coulomb scaled by the joint's force
     scale: only ratios and correlations are meaningful).  status: "identified" (std below
-    IDENTIFIED_REL_STD × value), "not_identified", "at_bound" (fitted at 0) or, for an inertia
-    ratio, "prior_dominated" (the prior's information on it exceeds the data's, marginally over the
+    IDENTIFIED_REL_STD × value), "not_identified", "at_bound" (fitted at 0) or, for a mass or
+    inertia ratio, "prior_dominated" (the prior's information on it exceeds the data's, marginally over the
     other parameters) / "identified" / "not_identified" (no positive curvature)."""
     if sp.hess_lag is None or not np.isfinite(res.objective):
         return {}
@@ -787,7 +823,7 @@ def dynamic_identifiability(sp: ScrewProblem, res: Result) -> dict:
     x = np.zeros(nw)
     for name, sl in vs.items():
         x[sl] = np.asarray(res.values[name], dtype=float).reshape(-1, order="F")
-    params = [n for n in vs if n.startswith(("damping:", "coulomb:", "inertia_ratio:"))]
+    params = [n for n in vs if n.startswith(DYNAMIC_PARAMETERS)]
     if not params:
         return {}
     Hu = np.asarray(sp.hess_lag(x, [], 1.0, np.zeros(ng)).full())
@@ -807,7 +843,7 @@ def dynamic_identifiability(sp: ScrewProblem, res: Result) -> dict:
         var_i = float(cov[i, i])
         std = float(np.sqrt(var_i)) if var_i > 0 else float("inf")
         rel = std / abs(value) if value != 0 else float("inf")
-        if name.startswith("inertia_ratio:"):
+        if name.startswith(RATIO_PARAMETERS):
             prior_info = (1 - np.log(value)) / (sigma**2 * value**2) if 0 < sigma < np.inf else 0.0
             if not np.isfinite(std):  # the curvature there is not positive: nothing pins it
                 status = "not_identified"
@@ -854,10 +890,10 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         raise KinemaforgeError("the screw NLP has nothing to fit: 'vis' is off and 'dyn' has no recorded forces")
     opts = dataclasses.replace(options, dyn=want_dense)
 
-    def run(name, corr, dense):
+    def run(name, corr, dense, held=frozenset()):
         nonlocal state
         t0 = time.perf_counter()
-        sp = build_screw_problem(data, opts, state, corr, dense)
+        sp = build_screw_problem(data, opts, state, corr, dense, held)
         res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn, sp.hess_lag))
         accepted = False
         if np.isfinite(res.objective):
@@ -894,6 +930,20 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     else:
         corr = correspondences(data, state, size) if options.vis else None
     sp, res = run("full", corr, dense=True)
+    identifiability = _identifiability(sp, res)
+    unsupported = _unsupported(identifiability)
+    if unsupported:
+        # joint friction the recording cannot determine keeps its nominal value; the rest is re-fitted
+        state = _nominal_friction(state, data.model, unsupported)
+        notes.append("dyn: not identified, kept at the nominal value: " + ", ".join(sorted(unsupported)))
+        sp, res = run("full_refit", corr, dense=True, held=frozenset(unsupported))
+        refit = _identifiability(sp, res)
+        # a parameter that the refit no longer determines is held too, without another solve
+        later = _unsupported(refit)
+        state = _nominal_friction(state, data.model, later)
+        identifiability = {**identifiability, **{k: v for k, v in refit.items() if k != "correlation_damping_coulomb"},
+                           "correlation_damping_coulomb": refit.get("correlation_damping_coulomb", {})}
+        unsupported |= later
     model = state_model(data, state)
     cols = np.searchsorted(state.t, data.times)
     terms = {"vis": None, "dyn": None, "energy": None, "inertia_prior": None}
@@ -902,12 +952,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         terms[key] = float(value) * (max(sp.n_vis, 1) if name != "energy_residual" else 1.0)
     if corr:
         terms["vis"] = vis_value(data, state, corr)
-    identified = tuple(n.split(":", 1)[0] + ":" + n.split(":", 1)[1] for n in res.values
-                       if n.startswith(("damping:", "coulomb:", "inertia_ratio:")))
-    try:
-        identifiability = dynamic_identifiability(sp, res) if identified else {}
-    except np.linalg.LinAlgError as e:  # a singular state block: report why, keep the fit
-        identifiability = {"error": f"{type(e).__name__}: {e}"}
+    fitted = tuple(n for n in sp.problem.terms["variables"] if n.startswith(DYNAMIC_PARAMETERS)) + tuple(sorted(unsupported))
+    identified = tuple(n for n in fitted if identifiability.get(n, {}).get("status") == "identified")
     spans = stop_spans(data.times, state.q[cols]) if sp.use_dyn and options.stop_impacts else []
     if not sp.use_dyn:
         model = _without_fitted_dynamics(model, data.model)
@@ -916,7 +962,34 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         notes.append(f"dyn, energy: stop impacts; the terms leave out {where}")
     return ScrewResult(model, state.q[cols], state, terms, int(sum(s["iterations"] for s in stages)),
                        all(s["success"] for s in stages), tuple(stages), time.perf_counter() - start,
-                       identified, tuple(notes), identifiability)
+                       identified, tuple(notes), identifiability, fitted)
+
+
+def _identifiability(sp: ScrewProblem, res: Result) -> dict:
+    """:func:`dynamic_identifiability`, or {"error": ...} when the state block is singular."""
+    try:
+        return dynamic_identifiability(sp, res)
+    except np.linalg.LinAlgError as e:  # report why, keep the fit
+        return {"error": f"{type(e).__name__}: {e}"}
+
+
+def _unsupported(identifiability: dict) -> set[str]:
+    """Damping / Coulomb variables fitted away from their bound that the data do not determine
+    (status "not_identified" in ``identifiability``)."""
+    return {name for name, entry in identifiability.items()
+            if name.startswith(("damping:", "coulomb:")) and entry["status"] == "not_identified"}
+
+
+def _nominal_friction(state: ScrewState, nominal: ArticulatedModel, names: set[str]) -> ScrewState:
+    """``state`` with the damping / Coulomb coefficients ``names`` ("damping:<joint>") back at the
+    values of ``nominal``."""
+    damping, coulomb = state.damping.copy(), state.coulomb.copy()
+    for k, j in enumerate(nominal.movable_joints):
+        if f"damping:{j.name}" in names:
+            damping[k] = j.dynamics.damping
+        if f"coulomb:{j.name}" in names:
+            coulomb[k] = j.dynamics.coulomb
+    return dataclasses.replace(state, damping=damping, coulomb=coulomb)
 
 
 def refused_surfaces(data: ScrewData, state: ScrewState) -> ScrewData:
