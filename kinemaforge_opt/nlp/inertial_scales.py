@@ -27,6 +27,7 @@ import dataclasses
 
 import numpy as np
 
+from ..errors import ModelError
 from ..model import ArticulatedModel, Inertial
 
 # Smallest scale of the mesh's inertia about the centre of mass: the same floor as the ratios'
@@ -98,8 +99,13 @@ def scaled_parameters(inertial: Inertial, axis: np.ndarray | None, mass_ratio, i
 
 def scaled_inertial(inertial: Inertial, axis: np.ndarray | None, mass_ratio: float,
                     inertia_ratio: float | None = None) -> Inertial:
-    """The scaled body as an :class:`Inertial` (centre of mass unchanged)."""
+    """The scaled body as an :class:`Inertial` (centre of mass unchanged).  Ratios that leave no
+    positive inertia about the centre of mass (s_c ≤ 0: the axis inertia below the point mass's)
+    raise :class:`ModelError`."""
     if axis is None or inertia_ratio is None:
         return dataclasses.replace(inertial, mass=inertial.mass * mass_ratio, inertia=inertial.inertia * mass_ratio)
     s_c = float(com_scale(inertial, axis, mass_ratio, inertia_ratio))
+    if s_c <= 0:
+        raise ModelError(f"inertia_ratio {inertia_ratio:.4g} with mass_ratio {mass_ratio:.4g} leaves the body an "
+                         f"inertia about its centre of mass scaled by {s_c:.4g}; expected > 0 (a physical body)")
     return dataclasses.replace(inertial, mass=inertial.mass * mass_ratio, inertia=inertial.inertia * s_c)

@@ -49,7 +49,7 @@ import casadi as ca
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from ..errors import DataError, KinemaforgeError
+from ..errors import DataError, KinemaforgeError, ModelError
 from ..io.sequence import Wrenches
 from ..model import ArticulatedModel, JointLimits
 from ..physics.effects import EFFECTS
@@ -232,8 +232,9 @@ class ScrewResult:
     success: every stage converged.  stages: per stage (name, iterations, success, seconds).
     fitted: the dynamic parameters the NLP fitted ("damping:<joint>", "coulomb:<joint>",
     "mass_ratio:<link>", "inertia_ratio:<link>").  identified: those of them the data determine
-    (status "identified").  A damping or Coulomb coefficient the data do not determine is held at
-    the nominal (input model's) value and the rest re-fitted (stage ``full_refit``; notes say so);
+    (status "identified").  When a damping or Coulomb coefficient fitted away from 0 is not
+    determined by the data, every such coefficient not identified is held at the nominal (input
+    model's) value and the rest re-fitted (stage ``full_refit``; notes say so);
     a ratio the data do not determine stays near its prior (1, the mesh's).  notes: why a term was
     off (or cut short).  identifiability: per fitted dynamic parameter whether the data determine
     it (:func:`dynamic_identifiability`); empty when none was fitted."""
@@ -896,8 +897,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         sp = build_screw_problem(data, opts, state, corr, dense, held)
         res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn, sp.hess_lag))
         accepted = False
-        if np.isfinite(res.objective):
-            candidate = read_solution(sp, res)
+        if np.isfinite(res.objective) and _physical(data, candidate := read_solution(sp, res)):
             # an unconverged iterate is kept only if it fits the observed points no worse (VIS_SLACK)
             accepted = res.success or not corr or vis_value(data, candidate, corr) <= vis_value(data, state, corr) + VIS_SLACK
             if accepted:
@@ -932,18 +932,19 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     sp, res = run("full", corr, dense=True)
     identifiability = _identifiability(sp, res)
     unsupported = _unsupported(identifiability)
-    if unsupported:
+    if any(identifiability[n]["status"] == "not_identified" for n in unsupported):
         # joint friction the recording cannot determine keeps its nominal value; the rest is re-fitted
         state = _nominal_friction(state, data.model, unsupported)
         notes.append("dyn: not identified, kept at the nominal value: " + ", ".join(sorted(unsupported)))
-        sp, res = run("full_refit", corr, dense=True, held=frozenset(unsupported))
-        refit = _identifiability(sp, res)
-        # a parameter that the refit no longer determines is held too, without another solve
-        later = _unsupported(refit)
-        state = _nominal_friction(state, data.model, later)
-        identifiability = {**identifiability, **{k: v for k, v in refit.items() if k != "correlation_damping_coulomb"},
-                           "correlation_damping_coulomb": refit.get("correlation_damping_coulomb", {})}
-        unsupported |= later
+        sp_refit, res_refit = run("full_refit", corr, dense=True, held=frozenset(unsupported))
+        if stages[-1]["accepted"]:  # else the full stage's fit stands, its unsupported friction nominal
+            sp, res = sp_refit, res_refit
+            refit = _identifiability(sp, res)
+            # a parameter that the refit no longer determines is held too, without another solve
+            later = _unsupported(refit)
+            state = _nominal_friction(state, data.model, later)
+            identifiability = {**identifiability, **refit}
+            unsupported |= later
     model = state_model(data, state)
     cols = np.searchsorted(state.t, data.times)
     terms = {"vis": None, "dyn": None, "energy": None, "inertia_prior": None}
@@ -952,7 +953,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         terms[key] = float(value) * (max(sp.n_vis, 1) if name != "energy_residual" else 1.0)
     if corr:
         terms["vis"] = vis_value(data, state, corr)
-    fitted = tuple(n for n in sp.problem.terms["variables"] if n.startswith(DYNAMIC_PARAMETERS)) + tuple(sorted(unsupported))
+    fitted = tuple(dict.fromkeys([n for n in sp.problem.terms["variables"] if n.startswith(DYNAMIC_PARAMETERS)]
+                                 + sorted(unsupported)))
     identified = tuple(n for n in fitted if identifiability.get(n, {}).get("status") == "identified")
     spans = stop_spans(data.times, state.q[cols]) if sp.use_dyn and options.stop_impacts else []
     if not sp.use_dyn:
@@ -965,6 +967,16 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                        identified, tuple(notes), identifiability, fitted)
 
 
+def _physical(data: ScrewData, state: ScrewState) -> bool:
+    """Whether every link of ``state``'s model is a physical body (an unconverged iterate may
+    violate the floor on the inertia about the centre of mass)."""
+    try:
+        with_ratios(data.model, data.model, state.mass_ratio, state.inertia_ratio)
+    except ModelError:
+        return False
+    return True
+
+
 def _identifiability(sp: ScrewProblem, res: Result) -> dict:
     """:func:`dynamic_identifiability`, or {"error": ...} when the state block is singular."""
     try:
@@ -974,10 +986,11 @@ def _identifiability(sp: ScrewProblem, res: Result) -> dict:
 
 
 def _unsupported(identifiability: dict) -> set[str]:
-    """Damping / Coulomb variables fitted away from their bound that the data do not determine
-    (status "not_identified" in ``identifiability``)."""
+    """Damping / Coulomb variables the data do not determine: status "not_identified" or
+    "at_bound" (fitted at 0) in ``identifiability``.  Held at the nominal value in the refit, none
+    of them is left as a direction the objective does not bend along."""
     return {name for name, entry in identifiability.items()
-            if name.startswith(("damping:", "coulomb:")) and entry["status"] == "not_identified"}
+            if name.startswith(("damping:", "coulomb:")) and entry["status"] in ("not_identified", "at_bound")}
 
 
 def _nominal_friction(state: ScrewState, nominal: ArticulatedModel, names: set[str]) -> ScrewState:

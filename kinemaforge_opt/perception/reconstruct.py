@@ -289,13 +289,12 @@ def refined_lines(result: ScrewResult, per: Perception, lines: dict[str, JointLi
 
 
 def _apply_identified(model: ArticulatedModel, records: list[dict], result: ScrewResult) -> ArticulatedModel:
-    """The NLP's damping / Coulomb friction (those it fitted and did not hold at the nominal value
-    for want of data) and its mass and inertia ratios into the rebuilt model and the joint records
+    """The NLP's damping / Coulomb friction where the data determine it (the others keep the
+    nominal value) and its mass and inertia ratios into the rebuilt model and the joint records
     (``dynamics``)."""
-    fitted = set(result.fitted) - {n for n, e in result.identifiability.items()
-                                   if isinstance(e, dict) and e.get("status") == "not_identified"}
+    identified = set(result.identified)
     for j in result.model.movable_joints:
-        if f"damping:{j.name}" in fitted or f"coulomb:{j.name}" in fitted:
+        if f"damping:{j.name}" in identified or f"coulomb:{j.name}" in identified:
             d = j.dynamics
             model = model.with_joint(j.name, dynamics=dataclasses.replace(model.joint(j.name).dynamics,
                                                                          damping=d.damping, coulomb=d.coulomb))
