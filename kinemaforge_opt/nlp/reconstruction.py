@@ -49,11 +49,12 @@ import casadi as ca
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from ..errors import DataError, KinemaforgeError
+from ..errors import DataError, KinemaforgeError, ModelError
 from ..io.sequence import Wrenches
 from ..model import ArticulatedModel, JointLimits
 from ..physics.effects import EFFECTS
 from ..symbolic import build_dynamics
+from .inertial_scales import MIN_COM_SCALE, com_scale, has_axis_ratio, link_axis, scaled_inertial, scaled_parameters
 from .problem import Problem, Result
 from .structured_hessian import DenseTerms, lagrangian_hessian
 from .visual import Correspondences, SurfaceModel, correspond, surface_model, fixed_subsample, pseudo_huber, robust_value, z_vector
@@ -65,6 +66,13 @@ ENERGY_MODES = ("soft", "hard", "off")
 # damping and initial speed; the prior keeps the scale where the geometry puts it unless the
 # recorded forces say otherwise.
 INERTIA_PRIOR_SIGMA = float(np.log(2.0))
+# Prior spread of log(mass ratio / inertia ratio) of a rotating link: how far the mesh's first
+# moment per inertia about the axis (its shape, not its density) is off.  On five laptop lids
+# (full size laptop_0/1 seeds 0/1, quick laptop_1) the mesh's m·c / I_a came within 1-10 % of the
+# truth's (RMS 5 %), so 10 % is one standard deviation.  Without it, a revolute joint's mass ratio
+# drifted where the data barely see it: protocol_refrigerator_0's door to 0.10 (traded for its
+# axis tilt: 0.36 -> 0.58° axis error), the seed-1 laptop lids to I_a 3x the truth's.
+SHAPE_PRIOR_SIGMA = float(np.log(1.1))
 # Stop impacts (:func:`stop_spans`).  A joint arriving at an end of its observed range hits a stop
 # when it arrived faster than STOP_MIN_SPEED × its peak speed, leaves the end (if at all) slower
 # than STOP_REST × that speed (a smooth turn at the top of a swing leaves as fast as it came, a
@@ -85,6 +93,8 @@ STOP_BAND = 0.02
 # kept for true 5.7 / 6.1 kg; kept: 8.3 / 6.2 kg, 1-s drift 0.062 -> 0.004 m).
 VIS_SLACK = 0.5
 HESSIANS = ("exact", "gauss_newton", "flat", "lbfgs")
+# Bounds of the mass and inertia ratios (the mesh's mass properties are a guess, not that bad).
+RATIO_BOUNDS = (MIN_COM_SCALE, 50.0)
 
 
 @dataclass(frozen=True)
@@ -184,8 +194,9 @@ class ScrewData:
 @dataclass
 class ScrewState:
     """Current estimate.  axes (n, 3) joint frame (unit), origins (n, 3) parent frame [m], pitches (n,)
-    [m/rad]; t (G,) grid [s], q (G, n), v (G, n) or None; damping, coulomb (n,); inertia_ratio
-    {link: ratio}."""
+    [m/rad]; t (G,) grid [s], q (G, n), v (G, n) or None; damping, coulomb (n,); mass_ratio
+    {link: ratio of mass and first moment to the mesh's}; inertia_ratio {link: ratio of the inertia
+    about the link's joint axis to the mesh's} (:mod:`.inertial_scales`)."""
 
     axes: np.ndarray
     origins: np.ndarray
@@ -196,13 +207,16 @@ class ScrewState:
     damping: np.ndarray
     coulomb: np.ndarray
     inertia_ratio: dict[str, float] = field(default_factory=dict)
+    mass_ratio: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, eq=False)
 class ScrewProblem:
     """A built (not solved) screw NLP: ``problem`` plus what reading its solution needs.
     frame_cols: (T,) grid column of each observed time step.  dynamics: the bridge functions.
-    n_vis: number of weighted visual residuals (the objective's normaliser)."""
+    n_vis: number of weighted visual residuals (the objective's normaliser).  hess_lag: the
+    assembled Lagrangian Hessian (or None).  prior: the ratio prior as a Function of the parameter
+    variables (every variable but the states, declaration order), or None."""
 
     problem: Problem
     data: ScrewData
@@ -214,6 +228,7 @@ class ScrewProblem:
     use_dyn: bool
     n_vis: int
     hess_lag: ca.Function | None = None
+    prior: ca.Function | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -225,9 +240,14 @@ class ScrewResult:
     normalised defects, ``energy`` the soft penalty (× energy_weight) or, for the hard constraint,
     Σ (relative residual)² over the windows.  iterations: IPOPT iterations over all stages.
     success: every stage converged.  stages: per stage (name, iterations, success, seconds).
-    identified: which dynamic quantities were fitted.  notes: why a term was off (or cut short).
-    identifiability: per fitted dynamic parameter whether the data determine it
-    (:func:`dynamic_identifiability`); empty when none was fitted."""
+    fitted: the dynamic parameters the NLP fitted ("damping:<joint>", "coulomb:<joint>",
+    "mass_ratio:<link>", "inertia_ratio:<link>").  identified: those of them the data determine
+    (status "identified").  When a damping or Coulomb coefficient fitted away from 0 is not
+    determined by the data, every such coefficient not identified is held at the nominal (input
+    model's) value and the rest re-fitted (stage ``full_refit``; notes say so);
+    a ratio the data do not determine stays near its prior (1, the mesh's).  notes: why a term was
+    off (or cut short).  identifiability: per fitted dynamic parameter whether the data determine
+    it (:func:`dynamic_identifiability`); empty when none was fitted."""
 
     model: ArticulatedModel
     q: np.ndarray
@@ -240,6 +260,7 @@ class ScrewResult:
     identified: tuple[str, ...]
     notes: tuple[str, ...]
     identifiability: dict = field(default_factory=dict)
+    fitted: tuple[str, ...] = ()
 
 
 # --- helpers ---------------------------------------------------------------------------------
@@ -288,9 +309,18 @@ def state_model(data: ScrewData, state: ScrewState) -> ArticulatedModel:
         model = model.with_joint(j.name, T_parent_joint=T, axis=state.axes[k] / np.linalg.norm(state.axes[k]),
                                  pitch=float(state.pitches[k]) if j.type == "helical" else 0.0,
                                  limits=limits, dynamics=dyn)
-    for link, r in state.inertia_ratio.items():
+    return with_ratios(model, data.model, state.mass_ratio, state.inertia_ratio)
+
+
+def with_ratios(model: ArticulatedModel, axes_from: ArticulatedModel, mass_ratio: dict[str, float],
+                inertia_ratio: dict[str, float]) -> ArticulatedModel:
+    """``model`` with each link's mass properties scaled by its ratios (:func:`scaled_inertial`),
+    the inertia ratio taken about the link's joint axis in ``axes_from`` (the model the NLP was
+    built on)."""
+    for link, r_m in mass_ratio.items():
         inert = model.link(link).inertial
-        model = model.with_link(link, inertial=dataclasses.replace(inert, mass=inert.mass * r, inertia=inert.inertia * r))
+        scaled = scaled_inertial(inert, link_axis(axes_from, link), r_m, inertia_ratio.get(link))
+        model = model.with_link(link, inertial=scaled)
     return model
 
 
@@ -465,10 +495,12 @@ def stop_free(times: np.ndarray, q: np.ndarray, t_grid: np.ndarray) -> np.ndarra
 
 
 def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewState,
-                        corr: dict[str, list[Correspondences]] | None, dense: bool) -> ScrewProblem:
+                        corr: dict[str, list[Correspondences]] | None, dense: bool,
+                        held: frozenset[str] = frozenset()) -> ScrewProblem:
     """Build the NLP around ``state`` with fixed correspondences ``corr`` (see module doc).
     ``dense``: states (q, v) on the collocation grid with the dynamics/energy terms as the options
-    say; else q on the frame grid and only ``vis``."""
+    say; else q on the frame grid and only ``vis``.  ``held``: damping / Coulomb variables
+    ("damping:<joint>") held at the state's value instead of fitted."""
     model = data.model
     n = model.nq
     joints = model.movable_joints
@@ -528,11 +560,20 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             pitch_of.append(theta_sx[dyn.parameter(f"{j.name}.pitch").slice])
         else:
             pitch_of.append(None)
-    ratios = {}
+    ratios = []  # names of the ratio variables (mass_ratio:<l>, inertia_ratio:<l>)
     for l in ratio_links:
-        r = prob.variable(f"inertia_ratio:{l}", 1, lower=0.02, upper=50.0, init=state.inertia_ratio.get(l, 1.0))
-        ratios[l] = r
-        theta_parts.append(r * ca.DM(dyn.parameter(f"{l}.inertia").nominal))
+        inertial, axis = model.link(l).inertial, link_axis(model, l)
+        r_m = prob.variable(f"mass_ratio:{l}", 1, lower=RATIO_BOUNDS[0], upper=RATIO_BOUNDS[1],
+                            init=state.mass_ratio.get(l, 1.0))
+        ratios.append(f"mass_ratio:{l}")
+        r_a = None
+        if has_axis_ratio(inertial, axis):
+            r_a = prob.variable(f"inertia_ratio:{l}", 1, lower=RATIO_BOUNDS[0], upper=RATIO_BOUNDS[1],
+                                init=state.inertia_ratio.get(l, 1.0))
+            ratios.append(f"inertia_ratio:{l}")
+            # the scaled body stays physical: its inertia about the centre of mass stays positive
+            prob.add_constraint(f"com_inertia_floor:{l}", com_scale(inertial, axis, r_m, r_a), MIN_COM_SCALE, np.inf)
+        theta_parts.append(ca.vertcat(*scaled_parameters(inertial, axis, r_m, r_a)))
     use_prior = bool(ratios) and 0 < options.inertia_prior_sigma < np.inf
     theta_mx = ca.vertcat(*theta_parts)
 
@@ -632,7 +673,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         phi_parts = []
         for name, values in (("damping", state.damping), ("coulomb", state.coulomb)):
             for k, j in enumerate(joints):
-                if fit_dyn:
+                if fit_dyn and f"{name}:{j.name}" not in held:
                     force_s = _force_scale(data, j, v_s[k], a_s[k])
                     sc = force_s / v_s[k] if name == "damping" else force_s
                     z = prob.variable(f"{name}:{j.name}", 1, lower=0.0, init=values[k] / sc)
@@ -660,9 +701,8 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
                 terms["energy_residual"] = ca.sumsqr(rel * ca.DM(e_mask))
     prior_fn = None
     if use_dyn and use_prior:
-        # ½ Σ (log r / σ)²: in the units of the other terms (each ≈ ½ χ²), added with the same weight
-        zr = [prob.symbol(f"inertia_ratio:{l}") for l in ratios]
-        terms["inertia_prior"] = 0.5 * ca.sumsqr(ca.log(ca.vertcat(*zr)) / options.inertia_prior_sigma)
+        # ½ Σ e²: in the units of the other terms (each ≈ ½ χ²), added with the same weight
+        terms["inertia_prior"] = 0.5 * ca.sumsqr(ca.vertcat(*_prior_residuals(prob, ratios, options.inertia_prior_sigma)))
     for name, expr in terms.items():
         if name == "energy_residual":  # reported, not minimised
             continue
@@ -685,7 +725,52 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             options.energy_weight / options.energy_sigma**2,
             [(f"axis:{j.name}", f"unit_axis:{j.name}") for j in joints], options.hessian == "gauss_newton",
             dyn_mask=dyn_mask, energy_mask=e_mask if use_energy else None, prior=prior_fn))
-    return ScrewProblem(prob, data, options, new_state, frame_cols, dyn, tuple(free), use_dyn, n_vis, hess_lag)
+    return ScrewProblem(prob, data, options, new_state, frame_cols, dyn, tuple(free), use_dyn, n_vis, hess_lag, prior_fn)
+
+
+def _prior_residuals(prob: Problem, ratios: list[str], sigma: float) -> list:
+    """Normalised prior residuals of the ratio variables ``ratios``: log r_a / σ for a link's
+    inertia ratio (its scale), log(r_m / r_a) / SHAPE_PRIOR_SIGMA for its mass ratio beside it
+    (the mesh's shape), log r_m / σ for a link with a mass ratio only."""
+    out = []
+    for name in ratios:
+        kind, _, link = name.partition(":")
+        r = prob.symbol(name)
+        if kind == "inertia_ratio":
+            out.append(ca.log(r) / sigma)
+        elif f"inertia_ratio:{link}" in ratios:
+            out.append(ca.log(r / prob.symbol(f"inertia_ratio:{link}")) / SHAPE_PRIOR_SIGMA)
+        else:
+            out.append(ca.log(r) / sigma)
+    return out
+
+
+def _prior_hessian(sp: ScrewProblem, x: np.ndarray, params: list[str]) -> np.ndarray:
+    """(P, P) Hessian of the raw ratio prior (½ Σ e², :func:`_prior_residuals`) over ``params`` at
+    the decision vector ``x``; zeros without a prior."""
+    P = len(params)
+    if sp.prior is None:
+        return np.zeros((P, P))
+    vs, _ = sp.problem.layout()
+    names = [n for n in vs if n != "x"]
+    syms = [ca.MX.sym(n, vs[n].stop - vs[n].start) for n in names]
+    z = ca.vertcat(*syms)
+    H = ca.Function("prior_hessian", syms, [ca.hessian(sp.prior(*syms), z)[0]])(*[x[vs[n]] for n in names])
+    H = np.asarray(ca.DM(H).full())
+    offsets = np.cumsum([0] + [vs[n].stop - vs[n].start for n in names])
+    local = [int(offsets[names.index(p)]) for p in params]
+    return H[np.ix_(local, local)]
+
+
+def _prior_precision(name: str, value: float, params: list[str], sigma: float) -> float:
+    """Marginal precision [1/ratio²] the prior of :func:`_prior_residuals` alone gives the ratio
+    variable ``name`` at ``value`` (Gauss–Newton: log r_a ~ N(0, σ²), log r_m ~ N(0, σ² + σ_s²)
+    beside an inertia ratio, else N(0, σ²)); 0 without a prior."""
+    if not 0 < sigma < np.inf:
+        return 0.0
+    kind, _, link = name.partition(":")
+    var_log = sigma**2 + (SHAPE_PRIOR_SIGMA**2 if kind == "mass_ratio" and f"inertia_ratio:{link}" in params else 0.0)
+    return 1.0 / (var_log * value**2)
 
 
 def _force_scale(data: ScrewData, joint, v_s: float, a_s: float) -> float:
@@ -739,10 +824,11 @@ def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
             origins[k] = vals[f"origin:{j.name}"]
         if f"pitch:{j.name}" in vals:
             pitches[k] = float(vals[f"pitch:{j.name}"][0])
-    ratio = dict(st.inertia_ratio)
+    ratios = {"mass_ratio": dict(st.mass_ratio), "inertia_ratio": dict(st.inertia_ratio)}
     for name, v in vals.items():
-        if name.startswith("inertia_ratio:"):
-            ratio[name.split(":", 1)[1]] = float(v[0])
+        kind, _, link = name.partition(":")
+        if kind in ratios:
+            ratios[kind][link] = float(v[0])
     if "x" in vals:
         q, v = vals["x"][:n].T, vals["x"][n:].T
     else:
@@ -753,12 +839,17 @@ def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
         spline, v_s, a_s = _rates(sp.data.times, st.q[cols])
         for k, j in enumerate(joints):
             fs = _force_scale(sp.data, j, v_s[k], a_s[k])
-            if f"damping:{j.name}" in vals:  # IPOPT may relax the bound 0 by ~1e-8: clip
+            # IPOPT may relax the bound 0 by ~1e-8: clip
+            if f"damping:{j.name}" in vals:
                 damping[k] = max(float(vals[f"damping:{j.name}"][0]) * fs / v_s[k], 0.0)
+            if f"coulomb:{j.name}" in vals:
                 coulomb[k] = max(float(vals[f"coulomb:{j.name}"][0]) * fs, 0.0)
-    return ScrewState(axes, origins, pitches, st.t.copy(), q, v, damping, coulomb, ratio)
+    return ScrewState(axes, origins, pitches, st.t.copy(), q, v, damping, coulomb, ratios["inertia_ratio"],
+                      ratios["mass_ratio"])
 
 
+DYNAMIC_PARAMETERS = ("damping:", "coulomb:", "mass_ratio:", "inertia_ratio:")
+RATIO_PARAMETERS = ("mass_ratio:", "inertia_ratio:")
 # A fitted damping / Coulomb coefficient counts as identified when its standard deviation is below
 # this fraction of its value (its 95 % interval then excludes 0 by ~2σ).
 IDENTIFIED_REL_STD = 0.5
@@ -775,9 +866,10 @@ def dynamic_identifiability(sp: ScrewProblem, res: Result) -> dict:
     Returns {name: {"value", "std", "relative_std", "status"}, "correlation": {joint: ρ(damping,
     Coulomb)}} in the NLP's variable units (damping and Coulomb scaled by the joint's force
     scale: only ratios and correlations are meaningful).  status: "identified" (std below
-    IDENTIFIED_REL_STD × value), "not_identified", "at_bound" (fitted at 0) or, for an inertia
-    ratio, "prior_dominated" (the prior's information on it exceeds the data's, marginally over the
-    other parameters) / "identified" / "not_identified" (no positive curvature)."""
+    IDENTIFIED_REL_STD × value), "not_identified", "at_bound" (fitted at 0) or, for a mass or
+    inertia ratio, "identified" (the data's information on it, marginally over the other
+    parameters, at least the prior's), "prior_dominated" (less: it rests on the mesh) or
+    "not_identified" (no positive curvature)."""
     if sp.hess_lag is None or not np.isfinite(res.objective):
         return {}
     prob = sp.problem
@@ -787,7 +879,7 @@ def dynamic_identifiability(sp: ScrewProblem, res: Result) -> dict:
     x = np.zeros(nw)
     for name, sl in vs.items():
         x[sl] = np.asarray(res.values[name], dtype=float).reshape(-1, order="F")
-    params = [n for n in vs if n.startswith(("damping:", "coulomb:", "inertia_ratio:"))]
+    params = [n for n in vs if n.startswith(DYNAMIC_PARAMETERS)]
     if not params:
         return {}
     Hu = np.asarray(sp.hess_lag(x, [], 1.0, np.zeros(ng)).full())
@@ -800,6 +892,8 @@ def dynamic_identifiability(sp: ScrewProblem, res: Result) -> dict:
     S = Hpp - Hpx @ np.linalg.solve(Hxx + ridge * np.eye(free.size), Hpx.T)
     info = max(sp.n_vis, 1) * S
     cov = np.linalg.pinv(info)
+    # the data's own information: the prior's Hessian (it involves no states) taken out
+    cov_data = np.linalg.pinv(info - _prior_hessian(sp, x, params))
     sigma = sp.options.inertia_prior_sigma
     out = {}
     for i, name in enumerate(params):
@@ -807,13 +901,14 @@ def dynamic_identifiability(sp: ScrewProblem, res: Result) -> dict:
         var_i = float(cov[i, i])
         std = float(np.sqrt(var_i)) if var_i > 0 else float("inf")
         rel = std / abs(value) if value != 0 else float("inf")
-        if name.startswith("inertia_ratio:"):
-            prior_info = (1 - np.log(value)) / (sigma**2 * value**2) if 0 < sigma < np.inf else 0.0
+        if name.startswith(RATIO_PARAMETERS):
             if not np.isfinite(std):  # the curvature there is not positive: nothing pins it
                 status = "not_identified"
             else:
-                # marginal precision 1/var = data's + prior's: the prior dominates when the data add less
-                status = "prior_dominated" if 1.0 / var_i < 2 * prior_info else "identified"
+                # identified when the data alone (marginally over the other parameters) pin it at
+                # least as tightly as the prior alone does
+                data_info = 1.0 / cov_data[i, i] if cov_data[i, i] > 0 else 0.0
+                status = "identified" if data_info >= _prior_precision(name, value, params, sigma) else "prior_dominated"
         elif value <= 1e-6 * max(abs(x[pidx]).max(), 1e-12) or prob._vars[name].lower[0] >= value - 1e-9:
             status = "at_bound"
         else:
@@ -854,14 +949,13 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         raise KinemaforgeError("the screw NLP has nothing to fit: 'vis' is off and 'dyn' has no recorded forces")
     opts = dataclasses.replace(options, dyn=want_dense)
 
-    def run(name, corr, dense):
+    def run(name, corr, dense, held=frozenset()):
         nonlocal state
         t0 = time.perf_counter()
-        sp = build_screw_problem(data, opts, state, corr, dense)
+        sp = build_screw_problem(data, opts, state, corr, dense, held)
         res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn, sp.hess_lag))
         accepted = False
-        if np.isfinite(res.objective):
-            candidate = read_solution(sp, res)
+        if np.isfinite(res.objective) and _physical(data, candidate := read_solution(sp, res)):
             # an unconverged iterate is kept only if it fits the observed points no worse (VIS_SLACK)
             accepted = res.success or not corr or vis_value(data, candidate, corr) <= vis_value(data, state, corr) + VIS_SLACK
             if accepted:
@@ -894,6 +988,21 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     else:
         corr = correspondences(data, state, size) if options.vis else None
     sp, res = run("full", corr, dense=True)
+    identifiability = _identifiability(sp, res)
+    unsupported = _unsupported(identifiability)
+    if any(identifiability[n]["status"] == "not_identified" for n in unsupported):
+        # joint friction the recording cannot determine keeps its nominal value; the rest is re-fitted
+        state = _nominal_friction(state, data.model, unsupported)
+        notes.append("dyn: not identified, kept at the nominal value: " + ", ".join(sorted(unsupported)))
+        sp_refit, res_refit = run("full_refit", corr, dense=True, held=frozenset(unsupported))
+        if stages[-1]["accepted"]:  # else the full stage's fit stands, its unsupported friction nominal
+            sp, res = sp_refit, res_refit
+            refit = _identifiability(sp, res)
+            # a parameter that the refit no longer determines is held too, without another solve
+            later = _unsupported(refit)
+            state = _nominal_friction(state, data.model, later)
+            identifiability = {**identifiability, **refit}
+            unsupported |= later
     model = state_model(data, state)
     cols = np.searchsorted(state.t, data.times)
     terms = {"vis": None, "dyn": None, "energy": None, "inertia_prior": None}
@@ -902,12 +1011,9 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         terms[key] = float(value) * (max(sp.n_vis, 1) if name != "energy_residual" else 1.0)
     if corr:
         terms["vis"] = vis_value(data, state, corr)
-    identified = tuple(n.split(":", 1)[0] + ":" + n.split(":", 1)[1] for n in res.values
-                       if n.startswith(("damping:", "coulomb:", "inertia_ratio:")))
-    try:
-        identifiability = dynamic_identifiability(sp, res) if identified else {}
-    except np.linalg.LinAlgError as e:  # a singular state block: report why, keep the fit
-        identifiability = {"error": f"{type(e).__name__}: {e}"}
+    fitted = tuple(dict.fromkeys([n for n in sp.problem.terms["variables"] if n.startswith(DYNAMIC_PARAMETERS)]
+                                 + sorted(unsupported)))
+    identified = tuple(n for n in fitted if identifiability.get(n, {}).get("status") == "identified")
     spans = stop_spans(data.times, state.q[cols]) if sp.use_dyn and options.stop_impacts else []
     if not sp.use_dyn:
         model = _without_fitted_dynamics(model, data.model)
@@ -916,7 +1022,45 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         notes.append(f"dyn, energy: stop impacts; the terms leave out {where}")
     return ScrewResult(model, state.q[cols], state, terms, int(sum(s["iterations"] for s in stages)),
                        all(s["success"] for s in stages), tuple(stages), time.perf_counter() - start,
-                       identified, tuple(notes), identifiability)
+                       identified, tuple(notes), identifiability, fitted)
+
+
+def _physical(data: ScrewData, state: ScrewState) -> bool:
+    """Whether every link of ``state``'s model is a physical body (an unconverged iterate may
+    violate the floor on the inertia about the centre of mass)."""
+    try:
+        with_ratios(data.model, data.model, state.mass_ratio, state.inertia_ratio)
+    except ModelError:
+        return False
+    return True
+
+
+def _identifiability(sp: ScrewProblem, res: Result) -> dict:
+    """:func:`dynamic_identifiability`, or {"error": ...} when the state block is singular."""
+    try:
+        return dynamic_identifiability(sp, res)
+    except np.linalg.LinAlgError as e:  # report why, keep the fit
+        return {"error": f"{type(e).__name__}: {e}"}
+
+
+def _unsupported(identifiability: dict) -> set[str]:
+    """Damping / Coulomb variables the data do not determine: status "not_identified" or
+    "at_bound" (fitted at 0) in ``identifiability``.  Held at the nominal value in the refit, none
+    of them is left as a direction the objective does not bend along."""
+    return {name for name, entry in identifiability.items()
+            if name.startswith(("damping:", "coulomb:")) and entry["status"] in ("not_identified", "at_bound")}
+
+
+def _nominal_friction(state: ScrewState, nominal: ArticulatedModel, names: set[str]) -> ScrewState:
+    """``state`` with the damping / Coulomb coefficients ``names`` ("damping:<joint>") back at the
+    values of ``nominal``."""
+    damping, coulomb = state.damping.copy(), state.coulomb.copy()
+    for k, j in enumerate(nominal.movable_joints):
+        if f"damping:{j.name}" in names:
+            damping[k] = j.dynamics.damping
+        if f"coulomb:{j.name}" in names:
+            coulomb[k] = j.dynamics.coulomb
+    return dataclasses.replace(state, damping=damping, coulomb=coulomb)
 
 
 def refused_surfaces(data: ScrewData, state: ScrewState) -> ScrewData:

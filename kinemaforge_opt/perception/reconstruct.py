@@ -26,7 +26,7 @@ from ..io.atomic import atomic_path, write_text_atomic
 from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks
 from ..model import ArticulatedModel, Geometry, Inertial, Joint, JointLimits, Link, write_urdf
-from ..nlp.reconstruction import ScrewData, ScrewOptions, ScrewResult, refine_screws
+from ..nlp.reconstruction import ScrewData, ScrewOptions, ScrewResult, refine_screws, with_ratios
 from ..nlp.visual import surface_model
 from ..spatial import inverse, make_transform
 from .change import STATIC, TEST_SIGMAS
@@ -289,20 +289,18 @@ def refined_lines(result: ScrewResult, per: Perception, lines: dict[str, JointLi
 
 
 def _apply_identified(model: ArticulatedModel, records: list[dict], result: ScrewResult) -> ArticulatedModel:
-    """Damping / Coulomb friction and inertia ratios identified by the NLP into the rebuilt model
-    and the joint records (``dynamics``)."""
-    fitted = set(result.identified)
+    """The NLP's damping / Coulomb friction where the data determine it (the others keep the
+    nominal value) and its mass and inertia ratios into the rebuilt model and the joint records
+    (``dynamics``)."""
+    identified = set(result.identified)
     for j in result.model.movable_joints:
-        if f"damping:{j.name}" in fitted:
+        if f"damping:{j.name}" in identified or f"coulomb:{j.name}" in identified:
             d = j.dynamics
             model = model.with_joint(j.name, dynamics=dataclasses.replace(model.joint(j.name).dynamics,
                                                                          damping=d.damping, coulomb=d.coulomb))
             rec = next(r for r in records if r["name"] == j.name)
             rec["dynamics"] = {"damping": d.damping, "coulomb": d.coulomb}
-    for link, r in result.state.inertia_ratio.items():
-        inert = model.link(link).inertial
-        model = model.with_link(link, inertial=dataclasses.replace(inert, mass=inert.mass * r, inertia=inert.inertia * r))
-    return model
+    return with_ratios(model, result.model, result.state.mass_ratio, result.state.inertia_ratio)
 
 
 def _line_record(name: str, line: JointLine) -> dict:
@@ -328,11 +326,12 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
     model = _apply_identified(model, records, result)
     doc = {
         "enabled": True, "terms": result.terms, "iterations": result.iterations, "success": result.success,
-        "time_s": prepare_s + result.time_s, "prepare_s": prepare_s, "solve_s": result.time_s, "identified": list(result.identified), "notes": list(result.notes),
+        "time_s": prepare_s + result.time_s, "prepare_s": prepare_s, "solve_s": result.time_s, "fitted": list(result.fitted), "identified": list(result.identified), "notes": list(result.notes),
         "stages": [{k: v for k, v in st.items() if k in ("stage", "iterations", "success", "accepted", "status", "time_s", "solve_s", "costs")}
                    for st in result.stages],
         "options": dataclasses.asdict(options),
         "closed_form": [_line_record(n, lines[n]) for n in lines],
+        "mass_ratio": result.state.mass_ratio,
         "inertia_ratio": result.state.inertia_ratio,
         "identifiability": result.identifiability,
     }

@@ -98,12 +98,16 @@ def test_full_objective_recovers_axis_damping_and_mass_scale(pushed):
     r = refine_screws(data, ScrewOptions(energy="soft", substep_s=FINE))
     axis_deg, origin_m = _errors(r.model)
     assert r.success
-    assert axis_deg < 0.1 and origin_m < 1e-3
+    # the visual term alone leaves 0.13° here; the 3.4° tilt's gravity torque (∝ m·c) no longer
+    # pins the axis further, since m·c is fitted rather than taken from the (here exact) mesh
+    assert axis_deg < 0.15 and origin_m < 1e-3
     j = r.model.joint("hinge")
     assert j.dynamics.damping == pytest.approx(0.5, rel=0.05)
     assert j.dynamics.coulomb < 0.02  # none in the truth
     assert r.state.inertia_ratio["door"] == pytest.approx(1.0, rel=0.05)  # init inertia = true inertia
-    assert set(r.identified) == {"damping:hinge", "coulomb:hinge", "inertia_ratio:door"}
+    assert r.state.mass_ratio["door"] == pytest.approx(1.0, rel=0.1)
+    assert set(r.fitted) == {"damping:hinge", "coulomb:hinge", "mass_ratio:door", "inertia_ratio:door"}
+    assert set(r.identified) == {"damping:hinge", "mass_ratio:door", "inertia_ratio:door"}
     # the 1-N push fixes the inertia (σ ≈ 3 %, far tighter than the factor-2 prior) and the damping;
     # Coulomb sits at its bound 0, strongly anti-correlated with damping at 10 Hz
     ident = r.identifiability
@@ -121,7 +125,7 @@ def test_hard_energy_constraint_converges_and_holds(pushed):
     opts = ScrewOptions(energy="hard", energy_tolerance=0.01, substep_s=FINE)
     r = refine_screws(data, opts)
     assert r.success
-    assert _errors(r.model)[0] < 0.1
+    assert _errors(r.model)[0] < 0.15  # as in the soft case
     full = r.stages[-1]
     assert full["violations"]["energy"] <= 1e-6  # |relative residual| <= tolerance in every window
     n_windows = 2  # 1.5 s in 1-s windows
@@ -214,5 +218,7 @@ def test_an_unconverged_full_stage_that_fits_the_points_as_well_is_kept():
     idx = np.arange(0, t.size, 12)
     data = exact_data(true, init, t[idx], q[idx], q[idx] + np.random.default_rng(1).normal(0, 0.02, idx.size), wrenches=w)
     r = refine_screws(data, ScrewOptions(energy="soft", max_iter=20))
-    assert not r.stages[-1]["success"] and r.stages[-1]["accepted"]
+    full = next(s for s in r.stages if s["stage"] == "full")
+    assert not full["success"] and full["accepted"]
     assert r.state.inertia_ratio["door"] == pytest.approx(2.0, rel=0.05)
+    assert r.state.mass_ratio["door"] == pytest.approx(2.0, rel=0.05)

@@ -38,16 +38,24 @@ def box_surface(size: np.ndarray, center: np.ndarray, spacing: float) -> tuple[n
     return np.concatenate(pts), np.concatenate(nrm)
 
 
-def door_model(axis_world, origin_world, kind: str = "revolute", damping: float = 0.0, pitch: float = 0.0) -> ArticulatedModel:
+def box_inertial(mass: float, size: np.ndarray, com: np.ndarray) -> Inertial:
+    """A uniform box of ``mass`` [kg] and ``size`` (3,) [m] centred at ``com`` (link frame)."""
+    sx, sy, sz = np.asarray(size, float) ** 2
+    return Inertial(mass, np.asarray(com, float), mass / 12 * np.diag([sy + sz, sx + sz, sx + sy]))
+
+
+def door_model(axis_world, origin_world, kind: str = "revolute", damping: float = 0.0, pitch: float = 0.0,
+               gravity=(0.0, 0.0, -9.81), inertial: Inertial | None = None) -> ArticulatedModel:
     """Base (the world) + one box door on a joint through ``origin_world`` along ``axis_world``.
-    The door's link frame is the joint frame at q = 0 (world-aligned, at the origin)."""
+    The door's link frame is the joint frame at q = 0 (world-aligned, at the origin).  Its mass
+    properties: a uniform 3 kg slab of size BOX unless ``inertial`` says otherwise.  With gravity
+    along −y (the slab's face normal) the door is a lid: the hinge is horizontal."""
     center = np.asarray(origin_world) + np.array([BOX[0] / 2 + 0.01, 0.0, 0.0])
-    m = 3.0
-    I = m / 12 * np.diag([BOX[1] ** 2 + BOX[2] ** 2, BOX[0] ** 2 + BOX[2] ** 2, BOX[0] ** 2 + BOX[1] ** 2])
-    links = (Link("base"), Link("door", Inertial(m, center - origin_world, I)))
+    inertial = box_inertial(3.0, BOX, center - origin_world) if inertial is None else inertial
+    links = (Link("base"), Link("door", inertial))
     joint = Joint("hinge", kind, "base", "door", make_transform(np.eye(3), np.asarray(origin_world, float)),
                   normalize(np.asarray(axis_world, float)), pitch, JointLimits(-2.0, 2.0), JointDynamics(damping=damping))
-    return ArticulatedModel("door", links, (joint,))
+    return ArticulatedModel("door", links, (joint,), np.asarray(gravity, float))
 
 
 def door_surface_world(model: ArticulatedModel, spacing: float) -> tuple[np.ndarray, np.ndarray]:
@@ -112,3 +120,35 @@ def pushed_trajectory(model: ArticulatedModel, duration: float, hz: float, push_
     q = sol.y[0]
     pf = [wrench(tt, qq) for tt, qq in zip(t, q)]
     return t, q, sol.y[1], Wrenches(t, np.array([p for p, _ in pf]), np.array([f for _, f in pf]))
+
+
+def two_doors(axis_world, origin_a, origin_b, damping_a: float) -> ArticulatedModel:
+    """Base + two box doors on their own hinges ("hinge_a" -> "door_a", "hinge_b" -> "door_b"),
+    each like :func:`door_model`'s door; only hinge_a has damping."""
+    links, joints = [Link("base")], []
+    for name, origin, b in (("a", origin_a, damping_a), ("b", origin_b, 0.0)):
+        origin = np.asarray(origin, float)
+        links.append(Link(f"door_{name}", box_inertial(3.0, BOX, [BOX[0] / 2 + 0.01, 0.0, 0.0])))
+        joints.append(Joint(f"hinge_{name}", "revolute", "base", f"door_{name}", make_transform(np.eye(3), origin),
+                            normalize(np.asarray(axis_world, float)), 0.0, JointLimits(-2.0, 2.0), JointDynamics(damping=b)))
+    return ArticulatedModel("doors", tuple(links), tuple(joints))
+
+
+def two_door_data(true: ArticulatedModel, init: ArticulatedModel, times: np.ndarray, q_true: np.ndarray,
+                  q_init: np.ndarray, wrenches: Wrenches, point_sigma: float, rng=None) -> ScrewData:
+    """ScrewData for :func:`two_doors`: per door its exact surface and 400 surface points per step
+    moved to ``q_true`` (T, 2), with Gaussian noise of ``point_sigma`` [m]; the force acts on door_a."""
+    rng = rng or np.random.default_rng(0)
+    observed, surfaces = {}, {}
+    for k, j in enumerate(true.joints):
+        o, a = j.T_parent_joint[:3, 3], j.axis
+        center = o + true.link(j.child).inertial.com
+        S, Nrm = box_surface(BOX, center, 0.01)
+        fine, _ = box_surface(BOX, center, 0.01 / 2.3)
+        obs = []
+        for q in q_true[:, k]:
+            pts = fine[rng.choice(len(fine), 400, replace=False)]
+            obs.append((pts - o) @ exp_so3(a * q).T + o + rng.normal(0.0, point_sigma, pts.shape))
+        observed[j.child], surfaces[j.child] = obs, SurfaceModel(j.child, S, Nrm)
+    pushed = np.array(["door_a"] * wrenches.t.size, dtype=object)
+    return ScrewData(init, times, q_init, observed, surfaces, delta=0.002, gate=0.05, wrenches=wrenches, pushed_link=pushed)
