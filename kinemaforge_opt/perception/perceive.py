@@ -21,7 +21,8 @@ from .change import MOVING, STATIC, motion_status, pixel_status
 from .clouds import (NOISE_IMAGES, VOXEL_FOOTPRINTS, DepthNoise, FrameCloud, TimeCloud, downsample,
                      estimate_depth_noise, footprint, frame_cloud, fuse, pixel_stride, static_voxel)
 from .segment import Plane, environment_planes
-from .track import ICP_FINE_VOXELS, Proposal, Tracker, propose_and_track
+from .resegment import resegment
+from .track import ICP_FINE_VOXELS, Proposal, Tracker, merge_fragments, propose_and_track
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,6 +188,11 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
     t0 = stage("environment", t0, tick=False)
     tracker = Tracker(clouds, status, seq.cameras, noise, voxel, tuple(env))
     proposals = propose_and_track(tracker)
+    # points that another proposal's motion (or the base) explains better move there; a proposal
+    # left as one part's fragment is then absorbed like any other
+    split = resegment(tracker, proposals)
+    if any(a is not b for a, b in zip(split, proposals)) or len(split) != len(proposals):
+        proposals = merge_fragments(tracker, split)
     # a proposal seen at fewer steps than any joint fit needs relates to nothing: left out
     need = min(MIN_SAMPLES, times.size)
     proposals = [p for p in proposals if np.isfinite(p.Ts_delta[:, 0, 0]).sum() >= need]

@@ -1,0 +1,176 @@
+"""Motion-consistent per-point segmentation of tracked proposals.
+
+A proposal is one Euclidean cluster of moving points (:mod:`segment`), so two parts that touch
+while they move — two drawers stacked with no gap, a drawer front against its neighbour — can
+share one proposal, whose track then follows the larger of them.  After tracking, every point of
+a proposal is therefore asked which of the known rigid motions explains it: its own track, the
+static base (the identity), or the track of another proposal (carried from this proposal's
+reference step).  A motion's evidence for a point at a step is the point's *support*: +1 when the
+point, moved by the motion, lands on an observed surface (within the fine ICP radius of a fused
+point), −1 when the cameras saw through the place it lands on (the free-space test of
+:mod:`change`), 0 otherwise (hidden, out of view); the same evidence :meth:`Tracker.grow` weighs.
+
+Two motions are compared at the steps both observe where they move the proposal differently (RMS
+displacement of its points above the fine ICP radius); elsewhere they predict the same images.  A
+point *prefers* another motion when that motion's summed support exceeds its own track's by at
+least MIN_EVIDENCE: one more verdict can be a noise outlier (a 3σ test fails ~0.3 % of the time),
+two independent ones are the criterion :mod:`change` uses to call a point moving.  Points that
+prefer the same motion form *groups* (DBSCAN, as proposals are made); a group of at least the
+tracker's smallest part (``tracker.min_points``) leaves the proposal — to the base (its points
+are dropped from every proposal, so they are labelled base) or to the other proposal (carried to
+its reference step) — provided the new motion is not contradicted by the images at most of the
+compared steps (over MAX_VIOLATED_SHARE of the group seen through, :func:`track.acceptable`'s
+bound).  A proposal left with fewer than ``tracker.min_points`` points is dropped.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .clouds import downsample
+from .segment import CLUSTER_VOXELS, clusters
+from .track import COMOVING_SHARE, GROW_STEPS, ICP_FINE_VOXELS, MAX_VIOLATED_SHARE, Proposal, Tracker, displacement, tracking_subset
+
+# Net verdicts by which another motion must out-support a point's own track (module doc).
+MIN_EVIDENCE = 2
+# Support is computed on the proposal's points downsampled at this many voxels (each then
+# speaks for the few points of its cell: a group of the smallest part still has dozens).
+SCORE_VOXELS = CLUSTER_VOXELS
+BASE_MOTION = "base"
+
+
+def observed(Ts: np.ndarray) -> np.ndarray:
+    """(T,) whether each (4, 4) motion of a (T, 4, 4) track is known."""
+    return np.isfinite(Ts).all(axis=(1, 2))
+
+
+def step_support(tracker: Tracker, points: np.ndarray, T: np.ndarray, s: int) -> tuple[np.ndarray, np.ndarray]:
+    """((N,) support, (N,) seen through) at step s of (N, 3) world points moved by the (4, 4)
+    motion ``T`` (module doc: +1 on an observed surface, −1 seen through, 0 otherwise)."""
+    x = points @ T[:3, :3].T + T[:3, 3]
+    viol = tracker.verdicts(x, s)[1].astype(bool)
+    hit = tracker.full_tree(s).query(x, distance_upper_bound=ICP_FINE_VOXELS * tracker.voxel)[0] < np.inf
+    return hit.astype(int) - viol, viol
+
+
+def candidate_motions(p: Proposal, proposals: list[Proposal]) -> dict[str, np.ndarray]:
+    """Name -> (T, 4, 4) world motions of ``p``'s points from its reference step under each
+    alternative to its own track: the base (identity) and every other proposal observed at
+    ``p``'s reference step (its motion carried from there)."""
+    out = {BASE_MOTION: np.tile(np.eye(4), (len(p.Ts_delta), 1, 1))}
+    for q in proposals:
+        if q is not p and observed(q.Ts_delta)[p.ref]:
+            out[q.name] = q.Ts_delta @ np.linalg.inv(q.Ts_delta[p.ref])
+    return out
+
+
+def compared_steps(p: Proposal, Ts: np.ndarray, sample: np.ndarray, tolerance: float) -> np.ndarray:
+    """Of the steps both ``p`` and the motions ``Ts`` observe where they move (N, 3) ``sample``
+    apart by more than ``tolerance`` [m] RMS (:func:`track.displacement`), the GROW_STEPS where
+    they differ most (those discriminate best, as in :meth:`Tracker.grow`), in time order."""
+    both = np.flatnonzero(observed(p.Ts_delta) & observed(Ts))
+    apart = np.array([displacement(p.Ts_delta[s], Ts[s], sample) for s in both])
+    keep = np.argsort(-apart, kind="stable")[:GROW_STEPS]
+    return np.sort(both[keep[apart[keep] > tolerance]])
+
+
+def preferences(tracker: Tracker, p: Proposal, motions: dict[str, np.ndarray], steps: dict[str, np.ndarray],
+                points: np.ndarray) -> np.ndarray:
+    """(M,) name of the motion each of (M, 3) ``points`` (world, at ``p``'s reference step)
+    prefers, "" for ``p``'s own track: the alternative whose summed support over its compared
+    ``steps`` leads the own track's most, by at least MIN_EVIDENCE (module doc)."""
+    best = np.zeros(len(points), dtype=int)
+    choice = np.full(len(points), "", dtype=object)
+    own: dict[int, np.ndarray] = {}  # the own track's support per step, shared by the alternatives
+    for name, Ts in motions.items():
+        lead = np.zeros(len(points), dtype=int)
+        for s in steps[name]:
+            if s not in own:
+                own[s] = step_support(tracker, points, p.Ts_delta[s], s)[0]
+            lead += step_support(tracker, points, Ts[s], s)[0] - own[s]
+        take = (lead >= MIN_EVIDENCE) & (lead > best)
+        choice[take], best[take] = name, lead[take]
+    return choice
+
+
+def uncontradicted(tracker: Tracker, points: np.ndarray, Ts: np.ndarray, steps: np.ndarray) -> bool:
+    """Whether (N, 3) ``points`` moved by the motions ``Ts`` are seen through by at most
+    MAX_VIOLATED_SHARE of them at COMOVING_SHARE of ``steps`` (all of them when there are none)."""
+    x = tracking_subset(points)
+    shares = [step_support(tracker, x, Ts[s], s)[1].mean() for s in steps]
+    return bool(np.mean(np.array(shares) <= MAX_VIOLATED_SHARE) >= COMOVING_SHARE) if shares else True
+
+
+def _edge(tree: cKDTree, cells: np.ndarray, cell: float) -> np.ndarray:
+    """Indices of the sample cells on the edge of a group of ``cells`` (indices into the sample
+    behind ``tree``, cells of edge ``cell`` [m]): the group's cells next to a cell outside it and
+    those outside cells (26-neighbourhood)."""
+    inside = np.zeros(tree.n, dtype=bool)
+    inside[cells] = True
+    edge = set()
+    for c, nb in zip(cells, tree.query_ball_point(tree.data[cells], np.sqrt(3.0) * cell * 1.01)):
+        out = [j for j in nb if not inside[j]]
+        if out:
+            edge.add(int(c))
+            edge.update(out)
+    return np.array(sorted(edge), dtype=int)
+
+
+def split_moves(tracker: Tracker, p: Proposal, proposals: list[Proposal]) -> list[tuple[str, np.ndarray]]:
+    """(motion name, indices into ``p.points``) of each group of ``p``'s points that another motion
+    explains better than ``p``'s own track and the images do not contradict (module doc).
+
+    Support is scored on the points downsampled at SCORE_VOXELS voxels, each point taking its
+    cell's choice; a group's edge cells (a boundary between two parts cuts through cells) are then
+    judged point by point, and their points join the group when its motion out-supports their own
+    track by MIN_EVIDENCE."""
+    motions = candidate_motions(p, proposals)
+    cell = SCORE_VOXELS * tracker.voxel
+    sample = downsample(p.points, cell)
+    steps = {name: compared_steps(p, Ts, sample, ICP_FINE_VOXELS * tracker.voxel) for name, Ts in motions.items()}
+    coarse = preferences(tracker, p, motions, steps, sample)
+    if not np.any(coarse != ""):
+        return []
+    tree = cKDTree(sample)
+    nearest = tree.query(p.points)[1]
+    taken = np.zeros(len(p.points), dtype=bool)
+    moves = []
+    for name in dict.fromkeys(c for c in coarse if c):
+        idx = np.flatnonzero(coarse[nearest] == name)
+        for group in clusters(p.points[idx], tracker.voxel, tracker.min_points):
+            members = idx[group]
+            if not uncontradicted(tracker, p.points[members], motions[name], steps[name]):
+                continue
+            on_edge = np.isin(nearest, _edge(tree, np.unique(nearest[members]), cell)) & ~taken
+            judged = np.flatnonzero(on_edge)
+            joins = judged[preferences(tracker, p, {name: motions[name]}, steps, p.points[judged]) == name]
+            members = np.union1d(np.setdiff1d(members, judged), joins)
+            taken[members] = True
+            moves.append((name, members))
+    return moves
+
+
+def resegment(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
+    """The proposals with every group of points that another motion explains moved to it (to the
+    base: dropped), judged against the tracks as given; proposals left smaller than
+    ``tracker.min_points`` are dropped (module doc); an unchanged proposal is returned as is."""
+    by_name = {p.name: p for p in proposals}
+    keep = {p.name: np.ones(len(p.points), dtype=bool) for p in proposals}
+    received: dict[str, list[np.ndarray]] = {p.name: [] for p in proposals}
+    for p in proposals:
+        for name, idx in split_moves(tracker, p, proposals):
+            keep[p.name][idx] = False
+            if name != BASE_MOTION:
+                q = by_name[name]
+                D = np.linalg.inv(q.Ts_delta[p.ref])  # p's reference step -> q's
+                received[name].append(p.points[idx] @ D[:3, :3].T + D[:3, 3])
+    out = []
+    for p in proposals:
+        if keep[p.name].all() and not received[p.name]:
+            out.append(p)  # unchanged: the same object
+            continue
+        points = np.concatenate([p.points[keep[p.name]], *received[p.name]])
+        if len(points) >= tracker.min_points:
+            out.append(Proposal(p.name, p.ref, points, p.Ts_delta))
+    return out
