@@ -30,7 +30,8 @@ from scipy.spatial import cKDTree
 
 from .clouds import downsample
 from .segment import CLUSTER_VOXELS, clusters
-from .track import COMOVING_SHARE, GROW_STEPS, ICP_FINE_VOXELS, MAX_VIOLATED_SHARE, Proposal, Tracker, displacement, tracking_subset
+from .track import (COMOVING_SHARE, GROW_STEPS, ICP_FINE_VOXELS, MAX_VIOLATED_SHARE, MIN_CONSISTENT_SHARE, Proposal,
+                    Tracker, displacement, tracking_subset)
 
 # Net verdicts by which another motion must out-support a point's own track (module doc).
 MIN_EVIDENCE = 2
@@ -38,6 +39,7 @@ MIN_EVIDENCE = 2
 # speaks for the few points of its cell: a group of the smallest part still has dozens).
 SCORE_VOXELS = CLUSTER_VOXELS
 BASE_MOTION = "base"
+UNEXPLAINED = "unexplained"  # points no known motion explains
 
 
 def observed(Ts: np.ndarray) -> np.ndarray:
@@ -102,6 +104,28 @@ def uncontradicted(tracker: Tracker, points: np.ndarray, Ts: np.ndarray, steps: 
     return bool(np.mean(np.array(shares) <= MAX_VIOLATED_SHARE) >= COMOVING_SHARE) if shares else True
 
 
+def unexplained(tracker: Tracker, p: Proposal, points: np.ndarray) -> np.ndarray:
+    """(M,) whether ``p``'s own track puts each of (M, 3) ``points`` (at its reference step) where
+    the images saw through at MIN_EVIDENCE or more of the steps whose pose the majority of the
+    judged points accept (MIN_CONSISTENT_SHARE: a step where the track itself failed says nothing
+    about which points belong to it), and at over 1 − COMOVING_SHARE of the steps where they are
+    judged — the share of failed steps :func:`track.support` excuses a partner's track: a track
+    a few centimetres off in its own plane at a step or two puts a strip along the part's edge in
+    the air there, and that strip stays)."""
+    cons_n = np.zeros(len(points), dtype=int)
+    viol_n = np.zeros(len(points), dtype=int)
+    for s in np.flatnonzero(observed(p.Ts_delta)):
+        if s == p.ref:
+            continue
+        T = p.Ts_delta[s]
+        cons, viol = tracker.verdicts(points @ T[:3, :3].T + T[:3, 3], s)
+        judged = cons.sum() + viol.sum()
+        if judged and cons.sum() >= MIN_CONSISTENT_SHARE * judged:
+            cons_n += cons
+            viol_n += viol
+    return (viol_n >= MIN_EVIDENCE) & (viol_n > (1.0 - COMOVING_SHARE) * (viol_n + cons_n))
+
+
 def _edge(tree: cKDTree, cells: np.ndarray, cell: float) -> np.ndarray:
     """Indices of the sample cells on the edge of a group of ``cells`` (indices into the sample
     behind ``tree``, cells of edge ``cell`` [m]): the group's cells next to a cell outside it and
@@ -130,7 +154,8 @@ def split_moves(tracker: Tracker, p: Proposal, proposals: list[Proposal]) -> lis
     sample = downsample(p.points, cell)
     steps = {name: compared_steps(p, Ts, sample, ICP_FINE_VOXELS * tracker.voxel) for name, Ts in motions.items()}
     coarse = preferences(tracker, p, motions, steps, sample)
-    if not np.any(coarse != ""):
+    lost = unexplained(tracker, p, sample)
+    if not np.any(coarse != "") and not lost.any():
         return []
     tree = cKDTree(sample)
     nearest = tree.query(p.points)[1]
@@ -148,6 +173,9 @@ def split_moves(tracker: Tracker, p: Proposal, proposals: list[Proposal]) -> lis
             members = np.union1d(np.setdiff1d(members, judged), joins)
             taken[members] = True
             moves.append((name, members))
+    # what no motion took and the own track puts where the images saw through is nobody's
+    idx = np.flatnonzero(lost[nearest] & ~taken)
+    moves += [(UNEXPLAINED, idx[group]) for group in clusters(p.points[idx], tracker.voxel, tracker.min_points)]
     return moves
 
 
@@ -161,7 +189,7 @@ def resegment(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
     for p in proposals:
         for name, idx in split_moves(tracker, p, proposals):
             keep[p.name][idx] = False
-            if name != BASE_MOTION:
+            if name not in (BASE_MOTION, UNEXPLAINED):
                 q = by_name[name]
                 D = np.linalg.inv(q.Ts_delta[p.ref])  # p's reference step -> q's
                 received[name].append(p.points[idx] @ D[:3, :3].T + D[:3, 3])
