@@ -1,26 +1,33 @@
 """Motion-consistent per-point segmentation of tracked proposals.
 
 A proposal is one Euclidean cluster of moving points (:mod:`segment`), so two parts that touch
-while they move — two drawers stacked with no gap, a drawer front against its neighbour — can
-share one proposal, whose track then follows the larger of them.  After tracking, every point of
-a proposal is therefore asked which of the known rigid motions explains it: its own track, the
-static base (the identity), or the track of another proposal (carried from this proposal's
-reference step).  A motion's evidence for a point at a step is the point's *support*: +1 when the
-point, moved by the motion, lands on an observed surface (within the fine ICP radius of a fused
-point), −1 when the cameras saw through the place it lands on (the free-space test of
-:mod:`change`), 0 otherwise (hidden, out of view); the same evidence :meth:`Tracker.grow` weighs.
+while they move — two drawers stacked with no gap — can share one proposal, whose track then
+follows the larger of them; growing can also carry a strip of the body into a part.  After
+tracking, every point of a proposal is therefore asked which of the known rigid motions explains
+it: its own track, the static base (the identity), or the track of another proposal (carried from
+this proposal's reference step).  A motion's evidence for a point at a step is the point's
+*support* under the free-space test of :mod:`change` against every image of the step: +1 when
+some image confirms the moved point, −1 when the cameras only saw through it, 0 otherwise
+(hidden, out of view).
 
 Two motions are compared at the steps both observe where they move the proposal differently (RMS
-displacement of its points above the fine ICP radius); elsewhere they predict the same images.  A
-point *prefers* another motion when that motion's summed support exceeds its own track's by at
-least MIN_EVIDENCE: one more verdict can be a noise outlier (a 3σ test fails ~0.3 % of the time),
-two independent ones are the criterion :mod:`change` uses to call a point moving.  Points that
-prefer the same motion form *groups* (DBSCAN, as proposals are made); a group of at least the
-tracker's smallest part (``tracker.min_points``) leaves the proposal — to the base (its points
-are dropped from every proposal, so they are labelled base) or to the other proposal (carried to
-its reference step) — provided the new motion is not contradicted by the images at most of the
-compared steps (over MAX_VIOLATED_SHARE of the group seen through, :func:`track.acceptable`'s
-bound).  A proposal left with fewer than ``tracker.min_points`` points is dropped.
+displacement of its points above the fine ICP radius; of those, the GROW_STEPS where they differ
+most), and only where the images judge the point as its own track places it (a part's hidden
+inside speaks for no motion).  A point *prefers* another motion when that motion's summed support
+exceeds its own track's by at least MIN_EVIDENCE: one verdict can be a noise outlier (a 3σ test
+fails ~0.3 % of the time), two independent ones are the criterion :mod:`change` uses to call a
+point moving.  Points that prefer the same motion form *groups* (DBSCAN, as proposals are made);
+a group of at least the tracker's smallest part (``tracker.min_points``) leaves the proposal — to
+the base (its points are dropped from every proposal, so they are labelled base) or to the other
+proposal (carried to its reference step) — provided the images do not contradict the new motion
+(at most MAX_VIOLATED_SHARE of the group seen through at COMOVING_SHARE of the compared steps).
+
+A group no motion takes whose own track puts it where the images saw through — at MIN_EVIDENCE
+steps or more, over 1 − COMOVING_SHARE of the steps where it is judged, counting only steps whose
+pose the majority of the proposal's judged points accept (:func:`unexplained`) — belongs to a part
+whose motion is unknown (a neighbouring drawer with no clean track of its own): it is dropped
+too, so that it does not bend its host's joint fit.  A proposal left with fewer than
+``tracker.min_points`` points is dropped.
 """
 
 from __future__ import annotations
@@ -47,13 +54,13 @@ def observed(Ts: np.ndarray) -> np.ndarray:
     return np.isfinite(Ts).all(axis=(1, 2))
 
 
-def step_support(tracker: Tracker, points: np.ndarray, T: np.ndarray, s: int) -> tuple[np.ndarray, np.ndarray]:
-    """((N,) support, (N,) seen through) at step s of (N, 3) world points moved by the (4, 4)
-    motion ``T`` (module doc: +1 on an observed surface, −1 seen through, 0 otherwise)."""
+def step_support(tracker: Tracker, points: np.ndarray, T: np.ndarray, s: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """((N,) support, (N,) seen through, (N,) judged) at step s of (N, 3) world points moved by the
+    (4, 4) motion ``T`` (module doc: support +1 on an observed surface, −1 seen through, 0
+    otherwise; judged: some image confirms or sees through the moved point)."""
     x = points @ T[:3, :3].T + T[:3, 3]
-    viol = tracker.verdicts(x, s)[1].astype(bool)
-    hit = tracker.full_tree(s).query(x, distance_upper_bound=ICP_FINE_VOXELS * tracker.voxel)[0] < np.inf
-    return hit.astype(int) - viol, viol
+    cons, viol = tracker.verdicts(x, s)
+    return cons - viol, viol.astype(bool), (cons + viol) > 0
 
 
 def candidate_motions(p: Proposal, proposals: list[Proposal]) -> dict[str, np.ndarray]:
@@ -81,7 +88,10 @@ def preferences(tracker: Tracker, p: Proposal, motions: dict[str, np.ndarray], s
                 points: np.ndarray) -> np.ndarray:
     """(M,) name of the motion each of (M, 3) ``points`` (world, at ``p``'s reference step)
     prefers, "" for ``p``'s own track: the alternative whose summed support over its compared
-    ``steps`` leads the own track's most, by at least MIN_EVIDENCE (module doc)."""
+    ``steps`` leads the own track's most, by at least MIN_EVIDENCE, counting only the steps where
+    the images judge the point where its own track puts it (a part's hidden inside — a drawer's
+    floor in the body — says nothing for its own track, and a motion that slides it onto some
+    visible surface is no better explanation) — module doc."""
     best = np.zeros(len(points), dtype=int)
     choice = np.full(len(points), "", dtype=object)
     own: dict[int, np.ndarray] = {}  # the own track's support per step, shared by the alternatives
@@ -89,8 +99,10 @@ def preferences(tracker: Tracker, p: Proposal, motions: dict[str, np.ndarray], s
         lead = np.zeros(len(points), dtype=int)
         for s in steps[name]:
             if s not in own:
-                own[s] = step_support(tracker, points, p.Ts_delta[s], s)[0]
-            lead += step_support(tracker, points, Ts[s], s)[0] - own[s]
+                mine, _, judged = step_support(tracker, points, p.Ts_delta[s], s)
+                own[s] = (mine, judged)
+            mine, judged = own[s]
+            lead += judged * (step_support(tracker, points, Ts[s], s)[0] - mine)
         take = (lead >= MIN_EVIDENCE) & (lead > best)
         choice[take], best[take] = name, lead[take]
     return choice

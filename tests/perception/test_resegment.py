@@ -36,20 +36,15 @@ def _stroke(start: int) -> np.ndarray:
 
 
 class _Oracle(Tracker):
-    """verdicts() and full_tree() from the true surfaces at each step; with ``flips``, every test
-    is wrong with that probability (a seen-through verdict on a surface point, a miss of a point in
-    the air is the same flip), seeded."""
+    """verdicts() from the true surfaces at each step; with ``flips``, every test is wrong with
+    that probability (a surface point seen through, a point in the air confirmed), seeded."""
 
     def __init__(self, surfaces: list[np.ndarray], flips: float = 0.0):
-        self.surfaces = surfaces
         self.trees = [cKDTree(s) for s in surfaces]
         self.voxel = VOXEL
         self.min_points = 40
         self.flips = flips
         self.rng = np.random.default_rng(0)
-
-    def full_tree(self, s):
-        return self.trees[s]
 
     def verdicts(self, points, s):
         on = self.trees[s].query(points, distance_upper_bound=ON_SURFACE)[0] < np.inf
