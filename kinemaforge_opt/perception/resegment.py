@@ -56,8 +56,8 @@ def observed(Ts: np.ndarray) -> np.ndarray:
 
 def step_support(tracker: Tracker, points: np.ndarray, T: np.ndarray, s: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """((N,) support, (N,) seen through, (N,) judged) at step s of (N, 3) world points moved by the
-    (4, 4) motion ``T`` (module doc: support +1 on an observed surface, −1 seen through, 0
-    otherwise; judged: some image confirms or sees through the moved point)."""
+    (4, 4) motion ``T`` (module doc: support +1 where some image confirms the moved point, −1
+    where the images only saw through it, 0 otherwise; judged: either of the two)."""
     x = points @ T[:3, :3].T + T[:3, 3]
     cons, viol = tracker.verdicts(x, s)
     return cons - viol, viol.astype(bool), (cons + viol) > 0
@@ -94,7 +94,7 @@ def preferences(tracker: Tracker, p: Proposal, motions: dict[str, np.ndarray], s
     visible surface is no better explanation) — module doc."""
     best = np.zeros(len(points), dtype=int)
     choice = np.full(len(points), "", dtype=object)
-    own: dict[int, np.ndarray] = {}  # the own track's support per step, shared by the alternatives
+    own: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # own track's (support, judged) per step
     for name, Ts in motions.items():
         lead = np.zeros(len(points), dtype=int)
         for s in steps[name]:
@@ -193,8 +193,9 @@ def split_moves(tracker: Tracker, p: Proposal, proposals: list[Proposal]) -> lis
 
 def resegment(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
     """The proposals with every group of points that another motion explains moved to it (to the
-    base: dropped), judged against the tracks as given; proposals left smaller than
-    ``tracker.min_points`` are dropped (module doc); an unchanged proposal is returned as is."""
+    base: dropped) and every unexplained group dropped, judged against the tracks as given
+    (:func:`split_moves`); proposals left smaller than ``tracker.min_points`` are dropped (module
+    doc); an unchanged proposal is returned as is."""
     by_name = {p.name: p for p in proposals}
     keep = {p.name: np.ones(len(p.points), dtype=bool) for p in proposals}
     received: dict[str, list[np.ndarray]] = {p.name: [] for p in proposals}
