@@ -120,3 +120,25 @@ def test_a_track_that_fails_at_some_steps_keeps_its_points():
     a = Proposal("a", 0, fa, Ts)
     out = resegment(_Oracle(surfaces), [a])
     assert out[0] is a
+
+
+def test_a_hidden_inside_is_no_evidence_for_a_motion_that_shows_it_elsewhere():
+    """A's floor lies deep in the carcass at every step (hidden: its own track gets no verdict);
+    B's long pull would carry it out onto a static table in front of the carcass, where the images
+    confirm it.  Evidence counts only where the images judge a point as its own track places it,
+    so the floor stays with A."""
+    fa, fb = _front(0.05), _front(0.2)
+    floor = np.stack(np.meshgrid(np.arange(-0.18, 0.18 + 1e-9, VOXEL), np.arange(0.25, 0.39 + 1e-9, VOXEL), [0.05],
+                                 indexing="ij"), axis=-1).reshape(-1, 3)
+    table = np.stack(np.meshgrid(np.arange(-0.2, 0.2 + 1e-9, VOXEL), np.arange(-0.5, -VOXEL + 1e-9, VOXEL), [0.05],
+                                 indexing="ij"), axis=-1).reshape(-1, 3)
+    ya, yb = _stroke(0), 0.05 * np.clip(np.arange(STEPS) - 8, 0, 8)  # B out 0.4 m at the end
+    surfaces = [np.concatenate([fa - [0, a, 0], fb - [0, b, 0], table]) for a, b in zip(ya, yb)]
+    a = Proposal("a", 4, np.concatenate([fa, floor]) - [0, ya[4], 0], _pull(ya, 4))
+    b = Proposal("b", 4, fb, _pull(yb, 4))
+    oracle = _Oracle(surfaces)
+    # the floor carried by B's motion does land on the table, confirmed there
+    on_table = [oracle.verdicts(floor - [0, ya[4] + yb[s] - yb[4], 0], s)[0].mean() for s in (14, 15)]
+    assert min(on_table) > 0.5
+    out = resegment(oracle, [a, b])
+    assert out[0] is a and out[1] is b
