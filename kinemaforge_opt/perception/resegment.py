@@ -176,13 +176,15 @@ def split_moves(tracker: Tracker, p: Proposal, proposals: list[Proposal]) -> lis
     for name in dict.fromkeys(c for c in coarse if c):
         idx = np.flatnonzero(coarse[nearest] == name)
         for group in clusters(p.points[idx], tracker.voxel, tracker.min_points):
-            members = idx[group]
+            members = idx[group][~taken[idx[group]]]  # not already joined to an earlier group's edge
             if not uncontradicted(tracker, p.points[members], motions[name], steps[name]):
                 continue
             on_edge = np.isin(nearest, _edge(tree, np.unique(nearest[members]), cell)) & ~taken
             judged = np.flatnonzero(on_edge)
             joins = judged[preferences(tracker, p, {name: motions[name]}, steps, p.points[judged]) == name]
             members = np.union1d(np.setdiff1d(members, judged), joins)
+            if len(members) < tracker.min_points:  # what its edge left is smaller than a part
+                continue
             taken[members] = True
             moves.append((name, members))
     # what no motion took and the own track puts where the images saw through is nobody's
