@@ -192,7 +192,7 @@ def _fmt(x, spec):
 
 def table(results: list[dict]) -> str:
     """Per-instance rows and a summary per category and overall."""
-    stages = ("load", "clouds", "motion", "proposals+tracks", "environment", "graph")
+    stages = ("load", "clouds", "motion", "proposals+tracks", "resegment", "environment", "graph")
     head = (f"{'case':<22} {'types':>6} {'topo':>5} {'IoU mov':>8} {'IoU base':>8} {'IoU all':>7} {'axis°':>6} {'orig mm':>7} "
             + " ".join(f"{s[:8]:>8}" for s in stages) + f" {'total':>7} {'cpu':>6}")
     lines = [head, "-" * len(head)]

@@ -5,7 +5,8 @@
 (URDF, meshes, reconstruction.json, clouds.npz).  Modules: ``clouds`` (back-projection, noise,
 fusion), ``change`` (free-space tests; per-pixel status for static cameras), ``segment``
 (DBSCAN proposals, environment planes), ``track`` (KD-tree ICP tracking, growth, merging), ``perceive`` (the stages in order),
-``surface`` (meshes, mass), ``reconstruct`` (the flow).
+``resegment`` (motion-consistent per-point split of tracked proposals), ``surface`` (meshes, mass),
+``reconstruct`` (the flow).
 """
 
 from .change import MOVING, STATIC, UNKNOWN, free_space_test, motion_status

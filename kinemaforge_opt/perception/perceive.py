@@ -1,6 +1,7 @@
 """The perception stages on a loaded sequence: depth -> fused world clouds -> motion status ->
-part proposals with SE(3) tracks -> background planes.  ``perceive(seq)`` returns a
-:class:`Perception` whose ``tracks`` feed ``graph.infer_tree``."""
+background planes -> part proposals with SE(3) tracks -> per-point resegmentation of the proposals
+(:mod:`resegment`).  ``perceive(seq)`` returns a :class:`Perception` whose ``tracks`` feed
+``graph.infer_tree``."""
 
 from __future__ import annotations
 
@@ -21,7 +22,8 @@ from .change import MOVING, STATIC, motion_status, pixel_status
 from .clouds import (NOISE_IMAGES, VOXEL_FOOTPRINTS, DepthNoise, FrameCloud, TimeCloud, downsample,
                      estimate_depth_noise, footprint, frame_cloud, fuse, pixel_stride, static_voxel)
 from .segment import Plane, environment_planes
-from .track import ICP_FINE_VOXELS, Proposal, Tracker, propose_and_track
+from .resegment import resegment
+from .track import ICP_FINE_VOXELS, Proposal, Tracker, merge_fragments, propose_and_track
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,6 +71,16 @@ def _jitter(p: Proposal) -> float:
     c = p.points.mean(axis=0)
     path = p.Ts_delta[ok, :3, :3] @ c + p.Ts_delta[ok, :3, 3]
     return noise_sigma(path)
+
+
+def _trackable(proposals: list[Proposal], steps: int, voxel: float) -> list[Proposal]:
+    """The proposals whose tracks can relate to a joint: seen at no fewer steps than any joint fit
+    needs (MIN_SAMPLES, or every one of ``steps`` when there are fewer), and with a jitter within
+    the fine ICP radius (ICP_FINE_VOXELS · ``voxel`` [m]; a track that jumps between surfaces
+    follows no part)."""
+    need = min(MIN_SAMPLES, steps)
+    proposals = [p for p in proposals if np.isfinite(p.Ts_delta[:, 0, 0]).sum() >= need]
+    return [p for p in proposals if _jitter(p) <= ICP_FINE_VOXELS * voxel]
 
 
 def static_cameras(seq: Sequence, times: np.ndarray) -> bool:
@@ -186,12 +198,13 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
     env = environment_planes(clouds[mid].points[status[mid] == STATIC], clouds[mid].points, radius)
     t0 = stage("environment", t0, tick=False)
     tracker = Tracker(clouds, status, seq.cameras, noise, voxel, tuple(env))
-    proposals = propose_and_track(tracker)
-    # a proposal seen at fewer steps than any joint fit needs relates to nothing: left out
-    need = min(MIN_SAMPLES, times.size)
-    proposals = [p for p in proposals if np.isfinite(p.Ts_delta[:, 0, 0]).sum() >= need]
-    # a track whose jitter exceeds the fine ICP radius jumps between surfaces: it follows no part
-    proposals = [p for p in proposals if _jitter(p) <= ICP_FINE_VOXELS * voxel]
+    proposals = _trackable(propose_and_track(tracker), times.size, voxel)
+    t0 = stage("proposals+tracks", t0)
+    # points that another proposal's motion (or the base) explains better move there; a proposal
+    # left as one part's fragment is then absorbed like any other
+    split = resegment(tracker, proposals)
+    if any(a is not b for a, b in zip(split, proposals)) or len(split) != len(proposals):
+        proposals = _trackable(merge_fragments(tracker, split), times.size, voxel)
     if not proposals:
         raise DataError(
             f"{seq.root}: no motion — no group of points moved between time steps beyond the depth "
@@ -205,5 +218,5 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
             if moved is not None:
                 on_part |= cKDTree(moved).query(c.points, distance_upper_bound=radius)[0] < np.inf
         status[s] = np.where(on_part, np.int8(MOVING), status[s])
-    stage("proposals+tracks", t0)
+    stage("resegment", t0, tick=False)  # with the status of points on the parts
     return Perception(times, clouds, status, noise, voxel, proposals, _tracks(proposals, times), env, timing, cpu)

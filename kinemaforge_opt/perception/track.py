@@ -148,7 +148,7 @@ def displacement(A: np.ndarray, B: np.ndarray, points: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
 
 
-def _sample(points: np.ndarray) -> np.ndarray:
+def tracking_subset(points: np.ndarray) -> np.ndarray:
     """At most MAX_TRACK_POINTS of (N, 3) points (a fixed random subset, as tracking uses)."""
     if len(points) <= MAX_TRACK_POINTS:
         return points
@@ -371,7 +371,7 @@ class Tracker:
         """Track (N, 3) world points of step ``ref`` through every step, then grow the
         proposal (module doc)."""
         n = len(self.clouds)
-        sample = _sample(points)
+        sample = tracking_subset(points)
         Ts = np.full((n, 4, 4), np.nan)
         Ts[ref] = np.eye(4)
         reach = WIDE_FACTOR * ICP_COARSE_VOXELS * self.voxel
@@ -581,7 +581,7 @@ def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
     ``by``'s own pose fails the images is its track's failure, not the fragment's, when it is
     one of a few)."""
     total, failed = 0.0, []
-    own = _sample(by.points)
+    own = tracking_subset(by.points)
     for s in steps:
         D = by.Ts_delta[s] @ np.linalg.inv(by.Ts_delta[anchor])
         cons, viol = tracker.verify(points @ D[:3, :3].T + D[:3, 3], int(s))
@@ -600,7 +600,7 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
     """(index of the proposal whose motion explains ``frag``'s points best, anchor step, the
     steps where that proposal's track failed: :func:`support`) or (None, None, []) (module doc,
     fragments)."""
-    x = _sample(frag.points)
+    x = tracking_subset(frag.points)
     observed = np.isfinite(frag.Ts_delta[:, 0, 0]).sum()
     best, best_support, best_anchor, failed = None, -np.inf, None, []
     for k, p in enumerate(proposals):
