@@ -736,9 +736,7 @@ def _prior_residuals(prob: Problem, ratios: list[str], sigma: float) -> list:
     for name in ratios:
         kind, _, link = name.partition(":")
         r = prob.symbol(name)
-        if kind == "inertia_ratio":
-            out.append(ca.log(r) / sigma)
-        elif f"inertia_ratio:{link}" in ratios:
+        if kind == "mass_ratio" and f"inertia_ratio:{link}" in ratios:
             out.append(ca.log(r / prob.symbol(f"inertia_ratio:{link}")) / SHAPE_PRIOR_SIGMA)
         else:
             out.append(ca.log(r) / sigma)
@@ -834,7 +832,7 @@ def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
     else:
         q, v = vals["q"].T, None
     # damping / coulomb are scaled variables: recover physical values from the built expression
-    if any(name.startswith(("damping:", "coulomb:")) for name in vals):
+    if any(name.startswith(FRICTION_PARAMETERS) for name in vals):
         cols = np.searchsorted(st.t, sp.data.times)
         spline, v_s, a_s = _rates(sp.data.times, st.q[cols])
         for k, j in enumerate(joints):
@@ -848,8 +846,9 @@ def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
                       ratios["mass_ratio"])
 
 
-DYNAMIC_PARAMETERS = ("damping:", "coulomb:", "mass_ratio:", "inertia_ratio:")
+FRICTION_PARAMETERS = ("damping:", "coulomb:")
 RATIO_PARAMETERS = ("mass_ratio:", "inertia_ratio:")
+DYNAMIC_PARAMETERS = FRICTION_PARAMETERS + RATIO_PARAMETERS
 # A fitted damping / Coulomb coefficient counts as identified when its standard deviation is below
 # this fraction of its value (its 95 % interval then excludes 0 by ~2σ).
 IDENTIFIED_REL_STD = 0.5
@@ -1048,7 +1047,7 @@ def _unsupported(identifiability: dict) -> set[str]:
     "at_bound" (fitted at 0) in ``identifiability``.  Held at the nominal value in the refit, none
     of them is left as a direction the objective does not bend along."""
     return {name for name, entry in identifiability.items()
-            if name.startswith(("damping:", "coulomb:")) and entry["status"] in ("not_identified", "at_bound")}
+            if name.startswith(FRICTION_PARAMETERS) and entry["status"] in ("not_identified", "at_bound")}
 
 
 def _nominal_friction(state: ScrewState, nominal: ArticulatedModel, names: set[str]) -> ScrewState:

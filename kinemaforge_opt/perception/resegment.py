@@ -129,10 +129,9 @@ def unexplained(tracker: Tracker, p: Proposal, points: np.ndarray) -> np.ndarray
     for s in np.flatnonzero(observed(p.Ts_delta)):
         if s == p.ref:
             continue
-        T = p.Ts_delta[s]
-        cons, viol = tracker.verdicts(points @ T[:3, :3].T + T[:3, 3], s)
-        judged = cons.sum() + viol.sum()
-        if judged and cons.sum() >= MIN_CONSISTENT_SHARE * judged:
+        support, viol, judged = step_support(tracker, points, p.Ts_delta[s], s)
+        cons = support > 0
+        if judged.any() and cons.sum() >= MIN_CONSISTENT_SHARE * judged.sum():
             cons_n += cons
             viol_n += viol
     return (viol_n >= MIN_EVIDENCE) & (viol_n > (1.0 - COMOVING_SHARE) * (viol_n + cons_n))
