@@ -106,7 +106,11 @@ class ScrewOptions:
     correspondences found once).  points_per_part: observed points per part and time step (fixed
     seeded subsample).  rounds: vis warm-up solves (correspondences refreshed before each).
     substep_s: longest collocation step [s].  dyn_sigma: relative size of a dynamics defect that
-    counts as one standard deviation.  energy_sigma (soft) / energy_tolerance (hard): relative
+    counts as one standard deviation (the prior, loosest scale).  dyn_row_sigma: (q̇ = v rows,
+    v̇ rows) scales replacing dyn_sigma, or None; set by ``reweight_dyn``: after the full stage,
+    the scales are re-estimated from that fit's defects (:func:`process_noise_scales`) and the
+    full objective solved again from its solution (not with the hard energy constraint: on the
+    pushed-door test that solve ran into max_iter).  energy_sigma (soft) / energy_tolerance (hard): relative
     energy-balance residual per window.  energy_weight: multiplies the soft energy term.
     energy_window_s: energy window length [s].  fit_dynamics: free damping, Coulomb friction and
     an inertia ratio per moving link when forces are recorded.  max_iter: IPOPT iterations per
@@ -131,6 +135,8 @@ class ScrewOptions:
     rounds: int = 6
     substep_s: float = 0.1
     dyn_sigma: float = 0.1
+    dyn_row_sigma: tuple[float, float] | None = None
+    reweight_dyn: bool = True
     energy_sigma: float = 0.05
     energy_tolerance: float = 0.02
     energy_weight: float = 1.0
@@ -229,6 +235,7 @@ class ScrewProblem:
     n_vis: int
     hess_lag: ca.Function | None = None
     prior: ca.Function | None = None
+    defects: ca.Function | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -663,7 +670,8 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         rm, wm = rhs(xm, ps, fs, ss)
         defect = xk1 - xk - h / 6 * (rk + 4 * rm + rk1)
         scale = ca.DM(np.concatenate([v_s, a_s]))
-        dnorm = defect / (h * scale) / options.dyn_sigma
+        sigma = ca.DM(np.repeat(options.dyn_row_sigma, n)) if options.dyn_row_sigma else options.dyn_sigma
+        dnorm = defect / (h * scale) / sigma
         interval = ca.Function("hermite_simpson", [xk, xk1, rk, rk1, wk, wk1, ps, fs, ss, h, theta_sx, phi],
                                [ca.sum1(pseudo_huber(dnorm, 1.0)), h / 6 * (wk + 4 * wm + wk1), dnorm], jit)
         energy = ca.Function("energy", [xs, theta_sx], [energy_of(xs)], jit)
@@ -682,7 +690,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
                     phi_parts.append(ca.MX(values[k]))
         phi_mx = ca.vertcat(*phi_parts)
         Rg, Wg = point.map(G)(X, P, F, S, theta_mx, phi_mx)
-        Dsum, Wk, _ = interval.map(G - 1)(X[:, :-1], X[:, 1:], Rg[:, :-1], Rg[:, 1:], Wg[:, :-1], Wg[:, 1:],
+        Dsum, Wk, Dn = interval.map(G - 1)(X[:, :-1], X[:, 1:], Rg[:, :-1], Rg[:, 1:], Wg[:, :-1], Wg[:, 1:],
                                        Pm, Fm, Sm, np.diff(t_grid)[None, :], theta_mx, phi_mx)
         terms["dyn"] = ca.sum2(Dsum * ca.DM(dyn_mask[None, :]))
         if use_energy:
@@ -712,6 +720,10 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
     if not prob.terms["costs"]:
         raise KinemaforgeError("the screw NLP has no active term: enable 'vis' (with observed points) or 'dyn'")
     new_state = dataclasses.replace(state, t=t_grid, q=q0, v=v0 if use_dyn else None)
+    defects = None
+    if use_dyn:  # the normalised defects (2n, G - 1) of the free intervals, for the process-noise estimate
+        names = prob.terms["variables"]
+        defects = ca.Function("defects", [prob.symbol(name) for name in names], [Dn[:, np.flatnonzero(dyn_mask).tolist()]])
     hess_lag = None
     if use_dyn and options.hessian in ("exact", "gauss_newton"):
         pnames = [name for name in prob.terms["variables"] if name != "x"]
@@ -725,7 +737,8 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             options.energy_weight / options.energy_sigma**2,
             [(f"axis:{j.name}", f"unit_axis:{j.name}") for j in joints], options.hessian == "gauss_newton",
             dyn_mask=dyn_mask, energy_mask=e_mask if use_energy else None, prior=prior_fn))
-    return ScrewProblem(prob, data, options, new_state, frame_cols, dyn, tuple(free), use_dyn, n_vis, hess_lag, prior_fn)
+    return ScrewProblem(prob, data, options, new_state, frame_cols, dyn, tuple(free), use_dyn, n_vis, hess_lag, prior_fn,
+                        defects)
 
 
 def _prior_residuals(prob: Problem, ratios: list[str], sigma: float) -> list:
@@ -987,6 +1000,13 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     else:
         corr = correspondences(data, state, size) if options.vis else None
     sp, res = run("full", corr, dense=True)
+    if options.reweight_dyn and options.energy != "hard" and sp.defects is not None and stages[-1]["accepted"]:
+        opts = dataclasses.replace(opts, dyn_row_sigma=process_noise_scales(sp, res))
+        sp_rw, res_rw = run("full_reweighted", corr, dense=True)
+        if stages[-1]["accepted"]:
+            sp, res = sp_rw, res_rw
+            notes.append("dyn: defect scales re-estimated from the full fit: q̇ = v {:.3g}, v̇ {:.3g} (prior {:.3g})"
+                         .format(*opts.dyn_row_sigma, options.dyn_sigma))
     identifiability = _identifiability(sp, res)
     unsupported = _unsupported(identifiability)
     if any(identifiability[n]["status"] == "not_identified" for n in unsupported):
@@ -1022,6 +1042,26 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     return ScrewResult(model, state.q[cols], state, terms, int(sum(s["iterations"] for s in stages)),
                        all(s["success"] for s in stages), tuple(stages), time.perf_counter() - start,
                        identified, tuple(notes), identifiability, fitted)
+
+
+# The re-estimated defect scales are at least this share of dyn_sigma: a bound on how much more
+# the re-weighted fit may trust the dynamics than the prior (the conditioning of the dense solve),
+# not a property of the object.
+MIN_ROW_SIGMA_SHARE = 0.05
+
+
+def process_noise_scales(sp: ScrewProblem, res: Result) -> tuple[float, float]:
+    """Relative defect scales (q̇ = v rows, v̇ rows) the solved dense problem's own defects
+    support: dyn_sigma × the RMS of the normalised defects of each row kind over the free
+    intervals (one step of the maximum-likelihood update of a variance component), within
+    [MIN_ROW_SIGMA_SHARE, 1] × dyn_sigma.  The q̇ = v rows take up the tracks' measurement noise,
+    the v̇ rows the model's force error; one prior scale for both leaves the second, which is what
+    determines friction and inertia, weighed far below what the data support."""
+    D = np.asarray(sp.defects(*[res.values[name] for name in sp.problem.terms["variables"]]))
+    n = D.shape[0] // 2
+    sigma = sp.options.dyn_sigma
+    rms = [float(np.sqrt(np.mean(rows**2))) if rows.size else 1.0 for rows in (D[:n], D[n:])]
+    return tuple(sigma * min(max(r, MIN_ROW_SIGMA_SHARE), 1.0) for r in rms)
 
 
 def _physical(data: ScrewData, state: ScrewState) -> bool:
