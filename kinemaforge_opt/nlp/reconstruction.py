@@ -110,8 +110,8 @@ class ScrewOptions:
     v̇ rows) scales replacing dyn_sigma, or None; set by ``reweight_dyn``: after the full stage,
     the scales are re-estimated from that fit's defects (:func:`process_noise_scales`) and the
     full objective solved again from its solution (not with the hard energy constraint: on the
-    pushed-door test that solve ran into max_iter).  energy_sigma (soft) / energy_tolerance (hard): relative
-    energy-balance residual per window.  energy_weight: multiplies the soft energy term.
+    pushed-door test that solve ran into max_iter).  energy_sigma (soft) / energy_tolerance
+    (hard): relative energy-balance residual per window.  energy_weight: multiplies the soft energy term.
     energy_window_s: energy window length [s].  fit_dynamics: free damping, Coulomb friction and
     an inertia ratio per moving link when forces are recorded.  max_iter: IPOPT iterations per
     solve.  jit: compile the mapped functions (needs a C compiler).  hessian: of the dense stage's
