@@ -599,12 +599,12 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         after[1:] &= dyn_mask == 0
         after[:-1] &= dyn_mask == 0
         x_init = np.vstack([q0.T, v0.T])
-        held = np.zeros((2 * n, G), dtype=bool)
-        held[n:, after] = True
+        fixed_states = np.zeros((2 * n, G), dtype=bool)
+        fixed_states[n:, after] = True
         between = after.copy()
         between[frame_cols] = False
-        held[:n, between] = True
-        lower[held] = upper[held] = x_init[held]
+        fixed_states[:n, between] = True
+        lower[fixed_states] = upper[fixed_states] = x_init[fixed_states]
         X = prob.variable("x", (2 * n, G), init=np.vstack([q0.T, v0.T]), lower=lower, upper=upper)
         Q, V = X[:n, :], X[n:, :]
     else:
@@ -1020,7 +1020,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             # a parameter that the refit no longer determines is held too, without another solve
             later = _unsupported(refit)
             state = _nominal_friction(state, data.model, later)
-            identifiability = {**identifiability, **refit}
+            identifiability = {**identifiability, **_conditional(refit, identifiability)}
             unsupported |= later
     model = state_model(data, state)
     cols = np.searchsorted(state.t, data.times)
@@ -1080,6 +1080,19 @@ def _identifiability(sp: ScrewProblem, res: Result) -> dict:
         return dynamic_identifiability(sp, res)
     except np.linalg.LinAlgError as e:  # report why, keep the fit
         return {"error": f"{type(e).__name__}: {e}"}
+
+
+def _conditional(refit: dict, full: dict) -> dict:
+    """The refit's identifiability entries, each no more determined than the full fit found it:
+    the refit's curvature is conditional on the held friction (a modelling choice, not data), so
+    a status the full fit gave below "identified" stands, with the refit's value."""
+    out = {}
+    for name, entry in refit.items():
+        before = full.get(name)
+        if isinstance(entry, dict) and isinstance(before, dict) and before.get("status") not in (None, "identified"):
+            entry = {**entry, "status": before["status"]}
+        out[name] = entry
+    return out
 
 
 def _unsupported(identifiability: dict) -> set[str]:

@@ -136,6 +136,15 @@ def test_reweighting_trusts_the_dynamics_as_far_as_their_defects_allow(pushed):
     assert rel[1] < 0.5 * rel[0]
 
 
+def test_held_friction_is_a_constant_not_a_variable(pushed):
+    true, data, q = pushed
+    state = initial_state(data)
+    corr = correspondences(data, state, ScrewOptions().points_per_part)
+    names = build_screw_problem(data, ScrewOptions(), state, corr, dense=True,
+                                held=frozenset({"coulomb:hinge"})).problem.terms["variables"]
+    assert "coulomb:hinge" not in names and "damping:hinge" in names
+
+
 def test_hard_energy_constraint_converges_and_holds(pushed):
     true, data, q = pushed
     opts = ScrewOptions(energy="hard", energy_tolerance=0.01, substep_s=FINE)
