@@ -1059,9 +1059,10 @@ def process_noise_scales(sp: ScrewProblem, res: Result) -> tuple[float, float]:
     determines friction and inertia, weighed far below what the data support."""
     D = np.asarray(sp.defects(*[res.values[name] for name in sp.problem.terms["variables"]]))
     n = D.shape[0] // 2
-    sigma = sp.options.dyn_sigma
-    rms = [float(np.sqrt(np.mean(rows**2))) if rows.size else 1.0 for rows in (D[:n], D[n:])]
-    return tuple(sigma * min(max(r, MIN_ROW_SIGMA_SHARE), 1.0) for r in rms)
+    prior = sp.options.dyn_sigma
+    used = sp.options.dyn_row_sigma or (prior, prior)  # the scales D is normalised by
+    return tuple(min(max(s * float(np.sqrt(np.mean(rows**2))), MIN_ROW_SIGMA_SHARE * prior), prior)
+                 for s, rows in zip(used, (D[:n], D[n:])))
 
 
 def _physical(data: ScrewData, state: ScrewState) -> bool:
