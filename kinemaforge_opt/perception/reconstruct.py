@@ -16,6 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from tqdm import tqdm
 
@@ -32,6 +34,7 @@ from ..spatial import inverse, make_transform
 from .change import STATIC, TEST_SIGMAS
 from .perceive import Perception, perceive
 from .mass import moving_point_masks, part_mass_properties
+from .segment import CLUSTER_VOXELS
 from .surface import obj_text, part_surface
 
 BASE, ENVIRONMENT = "base", "environment"
@@ -44,7 +47,9 @@ def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
     """Per time step, (M_t,) part names of its fused points: a non-static point within the
     inlier distance of a tracked proposal takes the proposal's part (``part_of``: track name ->
     part name; the nearest proposal wins); points on a background plane (within TEST_SIGMAS σ_z
-    of one reading at their range, at most the inlier distance) are ENVIRONMENT; the rest is BASE."""
+    of one reading at their range, at most the inlier distance) are ENVIRONMENT; the rest is BASE,
+    except that a part's label then spreads through the non-static BASE points connected to it
+    (:func:`_spread_part_labels`)."""
     out = []
     for s, (c, st) in enumerate(zip(per.clouds, per.status)):
         labels = np.full(len(c.points), BASE, dtype=object)
@@ -65,7 +70,35 @@ def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
             take = (d < best) & (st != STATIC)
             labels[take] = part_of[p.name]
             best[take] = d[take]
-        out.append(labels)
+        out.append(_spread_part_labels(c.points, labels, st != STATIC, CLUSTER_VOXELS * per.voxel))
+    return out
+
+
+def _spread_part_labels(points: np.ndarray, labels: np.ndarray, unsettled: np.ndarray, reach: float) -> np.ndarray:
+    """(M,) labels with every non-static (``unsettled``) BASE point that is connected to a part's
+    points — through such points, each link shorter than ``reach`` [m], the proposals' clustering
+    distance — given the label of the nearest part point of its connected group.
+
+    A proposal holds the points seen when it was made (and grown), so a surface a part reveals as
+    it moves — a drawer's floor and inner walls once it is open — is no proposal's and would stay
+    BASE, while its readings change from step to step like the part's own.  Static points are
+    left alone: they are what keeps the body's rim, next to a part across a gap of millimetres,
+    out of the part."""
+    on_part = (labels != BASE) & (labels != ENVIRONMENT)
+    free = (labels == BASE) & unsettled
+    if not on_part.any() or not free.any():
+        return labels
+    idx = np.flatnonzero(on_part | free)
+    pairs = cKDTree(points[idx]).query_pairs(reach, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(idx.size, idx.size))
+    group = connected_components(graph, directed=False)[1]
+    out = labels.copy()
+    for g in np.unique(group[free[idx]]):
+        members = idx[group == g]
+        anchors = members[on_part[members]]
+        if anchors.size:
+            joined = members[free[members]]
+            out[joined] = labels[anchors][cKDTree(points[anchors]).query(points[joined])[1]]
     return out
 
 

@@ -54,3 +54,34 @@ def test_environment_pixels_get_the_environment_label(fridge):
     assert counts.get(("environment", "body"), 0) <= 0.05 * body
     # the static body is one part: the base holds most of the body's pixels
     assert counts.get(("base", "body"), 0) >= 0.85 * body
+
+
+def test_a_part_label_spreads_over_the_unsettled_points_it_touches_and_no_further():
+    """A drawer's front is labelled by its proposal; the floor it reveals when open (non-static,
+    touching the front) joins it; the body's rim beside it (static, 4 mm away) and a non-static
+    patch 10 cm off (touching nothing labelled) stay base; where two parts share one connected
+    group, each point takes its nearest part."""
+    from kinemaforge_opt.perception.reconstruct import BASE, ENVIRONMENT, _spread_part_labels
+
+    step = 0.005
+    grid = np.stack(np.meshgrid(np.arange(0, 0.2, step), np.arange(0, 0.1, step)), -1).reshape(-1, 2)
+    front = np.c_[grid[:, 0], np.zeros(len(grid)), grid[:, 1]]  # plane y = 0
+    floor = np.c_[grid[:, 0], grid[:, 1] + step, np.zeros(len(grid))]  # plane z = 0 behind it
+    rim = np.c_[grid[:, 0], np.full(len(grid), -0.004), grid[:, 1] + 0.102]  # above the front
+    far = front[:50] + [0.0, 0.0, 0.3]
+    other = np.c_[grid[:, 0] + 0.205, np.zeros(len(grid)), grid[:, 1]]  # a second part beside
+    points = np.concatenate([front, floor, rim, far, other])
+    n = len(grid)
+    labels = np.array([BASE] * len(points), dtype=object)
+    labels[:n] = "p0"
+    labels[-n:] = "p1"
+    labels[3 * n] = ENVIRONMENT  # an environment point is never relabelled
+    unsettled = np.ones(len(points), dtype=bool)
+    unsettled[2 * n:3 * n] = False  # the rim is static
+    out = _spread_part_labels(points, labels, unsettled, reach=2 * step)
+    assert (out[n:2 * n] == "p0").all()  # the revealed floor (nearer p0's front than p1's)
+    assert (out[2 * n:3 * n] == BASE).all()
+    assert out[3 * n] == ENVIRONMENT and (out[3 * n + 1:3 * n + 50] == BASE).all()
+    assert (out[:n] == "p0").all() and (out[-n:] == "p1").all()
+    # nothing labelled, nothing to spread
+    assert (_spread_part_labels(points, np.full(len(points), BASE, dtype=object), unsettled, 2 * step) == BASE).all()
