@@ -948,7 +948,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     correspondences of the closed form.  A stage that does not converge is recorded (``success``
     False, IPOPT's status kept); its last iterate is kept (``accepted``) only if its robust visual
     term is no worse than before the stage (within :data:`VIS_SLACK`), else the next stage starts
-    from the previous state."""
+    from the previous state.  The re-weighted full solve is kept only when it converges."""
     options = options or ScrewOptions()
     start = time.perf_counter()
     state = initial_state(data)
@@ -961,7 +961,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         raise KinemaforgeError("the screw NLP has nothing to fit: 'vis' is off and 'dyn' has no recorded forces")
     opts = dataclasses.replace(options, dyn=want_dense)
 
-    def run(name, corr, dense, held=frozenset()):
+    def run(name, corr, dense, held=frozenset(), converged_only=False):
         nonlocal state
         t0 = time.perf_counter()
         sp = build_screw_problem(data, opts, state, corr, dense, held)
@@ -969,7 +969,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         accepted = False
         if np.isfinite(res.objective) and _physical(data, candidate := read_solution(sp, res)):
             # an unconverged iterate is kept only if it fits the observed points no worse (VIS_SLACK)
-            accepted = res.success or not corr or vis_value(data, candidate, corr) <= vis_value(data, state, corr) + VIS_SLACK
+            accepted = res.success or not (converged_only or not corr or
+                                           vis_value(data, candidate, corr) > vis_value(data, state, corr) + VIS_SLACK)
             if accepted:
                 state = candidate
         stages.append({"stage": name, "iterations": res.iterations, "success": res.success, "status": res.status,
@@ -1002,7 +1003,9 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     sp, res = run("full", corr, dense=True)
     if options.reweight_dyn and options.energy != "hard" and sp.defects is not None and stages[-1]["accepted"]:
         opts = dataclasses.replace(opts, dyn_row_sigma=process_noise_scales(sp, res))
-        sp_rw, res_rw = run("full_reweighted", corr, dense=True)
+        # a refinement of a converged fit: its unconverged iterate may fit the points as well while
+        # its dynamics are anywhere (seen: a door's mass ×22 at max_iter), so only a converged one counts
+        sp_rw, res_rw = run("full_reweighted", corr, dense=True, converged_only=True)
         if stages[-1]["accepted"]:
             sp, res = sp_rw, res_rw
             notes.append("dyn: defect scales re-estimated from the full fit: q̇ = v {:.3g}, v̇ {:.3g} (prior {:.3g})"
