@@ -969,8 +969,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         accepted = False
         if np.isfinite(res.objective) and _physical(data, candidate := read_solution(sp, res)):
             # an unconverged iterate is kept only if it fits the observed points no worse (VIS_SLACK)
-            accepted = res.success or not (converged_only or not corr or
-                                           vis_value(data, candidate, corr) > vis_value(data, state, corr) + VIS_SLACK)
+            accepted = res.success or (not converged_only and (
+                not corr or vis_value(data, candidate, corr) <= vis_value(data, state, corr) + VIS_SLACK))
             if accepted:
                 state = candidate
         stages.append({"stage": name, "iterations": res.iterations, "success": res.success, "status": res.status,

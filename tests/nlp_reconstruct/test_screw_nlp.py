@@ -154,6 +154,15 @@ def test_an_unconverged_reweighted_solve_is_not_kept(pushed, monkeypatch):
     assert not any(n.startswith("dyn: defect scales") for n in r.notes)
 
 
+def test_without_the_visual_term_an_unconverged_full_stage_is_still_kept(pushed):
+    """With no observed points to compare (vis off) there is no visual test to fail: a full stage
+    stopped at max_iter keeps its iterate, as before the re-weighted stage had its own rule."""
+    true, data, q = pushed
+    r = refine_screws(data, ScrewOptions(vis=False, energy="soft", substep_s=FINE, max_iter=5, reweight_dyn=False))
+    full = next(s for s in r.stages if s["stage"] == "full")
+    assert not full["success"] and full["accepted"]
+
+
 def test_held_friction_is_a_constant_not_a_variable(pushed):
     true, data, q = pushed
     state = initial_state(data)
