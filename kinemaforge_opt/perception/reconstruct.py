@@ -91,14 +91,13 @@ def _spread_part_labels(points: np.ndarray, labels: np.ndarray, unsettled: np.nd
     idx = np.flatnonzero(on_part | free)
     pairs = cKDTree(points[idx]).query_pairs(reach, output_type="ndarray")
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(idx.size, idx.size))
-    group = connected_components(graph, directed=False)[1]
+    n_groups, group = connected_components(graph, directed=False)
+    anchored = np.bincount(group[on_part[idx]], minlength=n_groups) > 0
     out = labels.copy()
-    for g in np.unique(group[free[idx]]):
+    for g in np.flatnonzero(anchored & (np.bincount(group[free[idx]], minlength=n_groups) > 0)):
         members = idx[group == g]
-        anchors = members[on_part[members]]
-        if anchors.size:
-            joined = members[free[members]]
-            out[joined] = labels[anchors][cKDTree(points[anchors]).query(points[joined])[1]]
+        anchors, joined = members[on_part[members]], members[free[members]]
+        out[joined] = labels[anchors][cKDTree(points[anchors]).query(points[joined])[1]]
     return out
 
 
