@@ -129,11 +129,11 @@ def fixed_subsample(points: np.ndarray, n: int, seed: int) -> np.ndarray:
 
 
 def correspond(observed_world: np.ndarray, T_world0_t: np.ndarray, surface: SurfaceModel, gate: float,
-               size: int, delta: float) -> Correspondences:
+               size: int, delta: float, plane_gate: float = np.inf) -> Correspondences:
     """Nearest surface point of each observed point (M, 3) moved back to the zero configuration by
-    ``T_world0_t``⁻¹ (4, 4); pairs farther than ``gate`` [m] get weight 0.  Padded with zero
-    weights to ``size`` columns.  IRLS weights of the pseudo-Huber loss of width ``delta`` [m]
-    at ``T_world0_t``."""
+    ``T_world0_t``⁻¹ (4, 4); pairs farther than ``gate`` [m], or off the point's tangent plane by
+    more than ``plane_gate`` [m], get weight 0.  Padded with zero weights to ``size`` columns.
+    IRLS weights of the pseudo-Huber loss of width ``delta`` [m] at ``T_world0_t``."""
     m = len(observed_world)
     if m > size:
         raise ValueError(f"{m} observed points exceed the block size {size}")
@@ -147,11 +147,11 @@ def correspond(observed_world: np.ndarray, T_world0_t: np.ndarray, surface: Surf
     obs[:, :m] = observed_world.T
     tgt[:, :m] = surface.points[idx].T
     nrm[:, :m] = surface.normals[idx].T
-    w[:m] = (d <= gate).astype(float)
     if m < size:  # padding: unit normals keep the residual finite
         nrm[0, m:] = 1.0
     A = linear_rows(obs, tgt, nrm)
     r = A @ z_vector(T_world0_t)
+    w[:m] = ((d <= gate) & (np.abs(r[:m]) <= plane_gate)).astype(float)
     irls = w / np.sqrt(1.0 + (r / delta) ** 2)
     return Correspondences(obs, tgt, nrm, w, irls, (A * irls[:, None]).T @ A)
 
