@@ -35,8 +35,9 @@ dense stage's Lagrangian Hessian is assembled from per-block derivatives
 on protocol_cabinet_0 (2 doors, 77 grid points) the stage's build went from ~7 s CPU (casadi's
 Hessian of the expanded graph, still ``hessian="flat"``) to ~0.5 s; L-BFGS did not converge
 there.  Coarse-to-fine (:func:`refine_screws`): closed-form init → ``vis`` warm-up
-on the frame grid with correspondences refreshed between solves → full objective on the dense
-grid.
+on the frame grid with correspondences refreshed between solves → the same warm-up with pairs
+beyond 3 robust standard deviations of its settled residuals left out (:func:`residual_gate`) →
+full objective on the dense grid.
 """
 
 from __future__ import annotations
@@ -973,8 +974,9 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
 
     Stages: ``vis`` warm-up (up to ``options.rounds`` solves on the frame grid, correspondences and
     IRLS weights refreshed before each, the robust width annealed from half the gate down to
-    ``data.delta``; stops early once a round moves nothing) then the full objective on the dense
-    grid (correspondences refreshed once more); without coarse-to-fine, one full solve with the
+    ``data.delta``; stops early once a round moves nothing), the gated warm-up (as many rounds,
+    pairs beyond :func:`residual_gate` of the settled fit left out) then the full objective on
+    the dense grid (correspondences refreshed once more, gated); without coarse-to-fine, one full solve with the
     correspondences of the closed form.  A stage that does not converge is recorded (``success``
     False, IPOPT's status kept); its last iterate is kept (``accepted``) only if its robust visual
     term is no worse than before the stage (within :data:`VIS_SLACK`), else the next stage starts
