@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 from tqdm import tqdm
 
 from ..errors import DataError
@@ -49,7 +49,8 @@ def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
     part name; the nearest proposal wins); points on a background plane (within TEST_SIGMAS σ_z
     of one reading at their range, at most the inlier distance) are ENVIRONMENT; the rest is BASE,
     except that a part's label then spreads through the non-static BASE points connected to it
-    (:func:`_spread_part_labels`)."""
+    (:func:`_spread_part_labels`) and over the BASE points inside its convex hull
+    (:func:`_fill_part_hulls`)."""
     out = []
     for s, (c, st) in enumerate(zip(per.clouds, per.status)):
         labels = np.full(len(c.points), BASE, dtype=object)
@@ -70,7 +71,39 @@ def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
             take = (d < best) & (st != STATIC)
             labels[take] = part_of[p.name]
             best[take] = d[take]
-        out.append(_spread_part_labels(c.points, labels, st != STATIC, CLUSTER_VOXELS * per.voxel))
+        labels = _spread_part_labels(c.points, labels, st != STATIC, CLUSTER_VOXELS * per.voxel)
+        out.append(_fill_part_hulls(c.points, labels, per.voxel))
+    return out
+
+
+def _fill_part_hulls(points: np.ndarray, labels: np.ndarray, margin: float) -> np.ndarray:
+    """(M,) labels with every BASE point that lies inside a part's convex hull (the hull of that
+    part's points at this step), deeper than ``margin`` [m] (the cloud's voxel: nearer the hull's
+    faces a point is at its resolution's mercy), given that part's label; a point inside several
+    hulls takes the part with the nearest point.
+
+    A rigid part is a solid: what is seen inside its hull is its own inside — a drawer's floor and
+    inner walls seen through its open top.  Those slide along themselves as it moves, so the
+    free-space test reads them static (the label spreading leaves static points alone) and they
+    stayed BASE: ~5000 pixels per step of an open drawer on protocol_drawer_0."""
+    base = np.flatnonzero(labels == BASE)
+    out = labels.copy()
+    if not base.size:
+        return out
+    nearest = np.full(base.size, np.inf)
+    for name in sorted(set(labels.tolist()) - {BASE, ENVIRONMENT}):
+        part = points[labels == name]
+        try:
+            faces = ConvexHull(part).equations  # (F, 4): outward unit normal, offset
+        except (QhullError, ValueError):  # too few or coplanar points: no volume to fill
+            continue
+        inside = np.flatnonzero(np.all(points[base] @ faces[:, :3].T + faces[:, 3] <= -margin, axis=1))
+        if not inside.size:
+            continue
+        d = cKDTree(part).query(points[base[inside]])[0]
+        take = d < nearest[inside]
+        out[base[inside[take]]] = name
+        nearest[inside[take]] = d[take]
     return out
 
 

@@ -85,3 +85,33 @@ def test_a_part_label_spreads_over_the_unsettled_points_it_touches_and_no_furthe
     assert (out[:n] == "p0").all() and (out[-n:] == "p1").all()
     # nothing labelled, nothing to spread
     assert (_spread_part_labels(points, np.full(len(points), BASE, dtype=object), unsettled, 2 * step) == BASE).all()
+
+
+def test_base_points_inside_a_parts_hull_join_it_and_its_neighbours_stay():
+    """An open drawer labelled by its front, back and wall tops (a 0.3 × 0.2 × 0.1 m box): its floor and
+    inner walls (static to the free-space test, so still BASE) lie inside the hull of those points
+    and join it; the cabinet's wall 2 cm beside the drawer, a rim point within one voxel of the
+    hull's face, environment points inside it, and anything of a flat second part (no volume)
+    are left as they were."""
+    from kinemaforge_opt.perception.reconstruct import BASE, ENVIRONMENT, _fill_part_hulls
+
+    step, voxel = 0.01, 0.005
+    xs, ys, zs = np.arange(0, 0.3001, step), np.arange(0, 0.2001, step), np.arange(0, 0.1001, step)
+    front = np.array([[x, 0.0, z] for x in xs for z in zs])
+    tops = np.array([[x, y, 0.1] for x in (0.0, 0.3) for y in ys] + [[x, 0.2, z] for x in xs for z in zs])
+    floor = np.array([[x, y, 0.0] for x in xs[1:-1] for y in ys[1:-1]]) + [0, 0, 0.02]  # raised 2 cm: inside
+    inner = np.array([[0.01, y, z] for y in ys[1:-1] for z in zs[2:-2]])  # inner left wall
+    cabinet = np.array([[-0.02, y, z] for y in ys for z in zs])  # outside, 2 cm beside the drawer
+    rim = np.array([[0.15, 0.1, 0.1 - 0.4 * voxel]])  # inside, nearer the top face than a voxel
+    env = np.array([[0.15, 0.1, 0.05]])
+    flat = np.array([[x, 0.5, z] for x in xs for z in zs])  # a second, flat part
+    points = np.concatenate([front, tops, floor, inner, cabinet, rim, env, flat])
+    n = np.cumsum([0, len(front), len(tops), len(floor), len(inner), len(cabinet), 1, 1, len(flat)])
+    labels = np.array([BASE] * len(points), dtype=object)
+    labels[n[0]:n[2]] = "p0"
+    labels[n[6]] = ENVIRONMENT
+    labels[n[7]:] = "p1"
+    out = _fill_part_hulls(points, labels, voxel)
+    assert (out[n[2]:n[4]] == "p0").all()  # floor and inner wall joined
+    assert (out[n[4]:n[5]] == BASE).all() and out[n[5]] == BASE  # cabinet wall, rim point
+    assert out[n[6]] == ENVIRONMENT and (out[n[7]:] == "p1").all() and (out[:n[2]] == "p0").all()
