@@ -115,3 +115,27 @@ def test_base_points_inside_a_parts_hull_join_it_and_its_neighbours_stay():
     assert (out[n[2]:n[4]] == "p0").all()  # floor and inner wall joined
     assert (out[n[4]:n[5]] == BASE).all() and out[n[5]] == BASE  # cabinet wall, rim point
     assert out[n[6]] == ENVIRONMENT and (out[n[7]:] == "p1").all() and (out[:n[2]] == "p0").all()
+
+
+def test_base_speckle_amid_the_floor_becomes_environment_and_the_body_on_it_stays():
+    """A 1 × 1 m floor (ENVIRONMENT, 1 cm grid) with five BASE readings 2 cm above it in its
+    middle (noise beyond the plane band) and a 0.2 m box standing on it (BASE, its bottom row
+    touching the floor): the readings become environment, every point of the box stays base, and
+    a part's point amid the floor keeps its part."""
+    from kinemaforge_opt.perception.reconstruct import BASE, ENVIRONMENT, _environment_by_majority
+
+    g = np.arange(0, 1.0001, 0.01)
+    floor = np.array([[x, y, 0.0] for x in g for y in g])
+    speckle = np.array([[0.2 + 0.1 * i, 0.8, 0.02] for i in range(5)])
+    side = np.arange(0, 0.2001, 0.01)
+    box = np.array([[0.4 + a, 0.4 + b, 0.0 + c] for a in side for b in side for c in side
+                    if min(a, b, c) == 0 or max(a, b, c) > 0.199])  # the box's faces
+    box = box[box[:, 2] > 0.005]  # its bottom face rests on the floor, unseen
+    part = np.array([[0.8, 0.2, 0.01]])
+    points = np.concatenate([floor, speckle, box, part])
+    labels = np.array([ENVIRONMENT] * len(floor) + [BASE] * (len(speckle) + len(box)) + ["p0"], dtype=object)
+    out = _environment_by_majority(points, labels)
+    n = len(floor)
+    assert (out[n:n + 5] == ENVIRONMENT).all()
+    assert (out[n + 5:-1] == BASE).all()
+    assert out[-1] == "p0" and (out[:n] == ENVIRONMENT).all()
