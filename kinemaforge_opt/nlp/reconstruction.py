@@ -94,7 +94,8 @@ STOP_BAND = 0.02
 # with its normalised visual term 6e-5 of itself higher and was dropped, mesh masses 4.6 / 12.4 kg
 # kept for true 5.7 / 6.1 kg; kept: 8.3 / 6.2 kg, 1-s drift 0.062 -> 0.004 m).
 VIS_SLACK = 0.5
-# pairs beyond this many robust standard deviations of the warm-up's residuals are outliers (the 3σ rule)
+# Pairs beyond this many robust standard deviations of the warm-up's residuals are outliers (the
+# 3σ rule; :func:`residual_gate`).
 PLANE_GATE_SIGMAS = 3.0
 HESSIANS = ("exact", "gauss_newton", "flat", "lbfgs")
 # Bounds of the mass and inertia ratios (the mesh's mass properties are a guess, not that bad).
@@ -383,9 +384,8 @@ def residual_gate(data: ScrewData, state: ScrewState, corr: dict[str, list[Corre
     Why: the nearest-point gate (``data.gate``, two ICP inlier distances) admits the near edge of
     surfaces the zero-step model lacks (a door's inner face once it opens: half of
     protocol_microwave_0's door points at 90°); under the true motion the modelled points sit
-    within ~2 mm, and the
-    admitted tail pulled the vis-only axis 0.26° (closed form) -> 0.75° off; gated at 3σ̂ (8.9 mm)
-    it ends 0.33° off."""
+    within ~2 mm, and the admitted tail pulled the vis-only axis 0.26° (closed form) -> 0.75°
+    off; gated at 3σ̂ (8.9 mm) it ends 0.33° off."""
     model = state_model(data, state)
     cols = np.searchsorted(state.t, data.times)
     res = []
@@ -976,8 +976,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     IRLS weights refreshed before each, the robust width annealed from half the gate down to
     ``data.delta``; stops early once a round moves nothing), the gated warm-up (as many rounds,
     pairs beyond :func:`residual_gate` of the settled fit left out) then the full objective on
-    the dense grid (correspondences refreshed once more, gated); without coarse-to-fine, one full solve with the
-    correspondences of the closed form.  A stage that does not converge is recorded (``success``
+    the dense grid (correspondences refreshed once more, gated); without coarse-to-fine, one full
+    solve with the correspondences of the closed form.  A stage that does not converge is recorded (``success``
     False, IPOPT's status kept); its last iterate is kept (``accepted``) only if its robust visual
     term is no worse than before the stage (within :data:`VIS_SLACK`), else the next stage starts
     from the previous state.  The re-weighted full solve is kept only when it converges."""

@@ -38,6 +38,10 @@ from .segment import CLUSTER_VOXELS
 from .surface import obj_text, part_surface
 
 BASE, ENVIRONMENT = "base", "environment"
+# A BASE point whose MAJORITY_NEIGHBOURS nearest points are at least MAJORITY_SHARE environment
+# lies in the environment's surface (_environment_by_majority).
+MAJORITY_NEIGHBOURS = 16
+MAJORITY_SHARE = 0.75
 # Default density [kg/m³] of the convex part volumes: light wood / particle board, the material
 # of typical furniture (a user who knows better passes --density).
 DEFAULT_DENSITY = 300.0
@@ -76,12 +80,6 @@ def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
         labels = _fill_part_hulls(c.points, labels, per.voxel)
         out.append(_environment_by_majority(c.points, labels))
     return out
-
-
-# A BASE point whose MAJORITY_NEIGHBOURS nearest points are at least MAJORITY_SHARE environment
-# lies in the environment's surface (_environment_by_majority).
-MAJORITY_NEIGHBOURS = 16
-MAJORITY_SHARE = 0.75
 
 
 def _environment_by_majority(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
