@@ -58,8 +58,7 @@ from ..symbolic import build_dynamics
 from .inertial_scales import MIN_COM_SCALE, com_scale, has_axis_ratio, link_axis, scaled_inertial, scaled_parameters
 from .problem import Problem, Result
 from .structured_hessian import DenseTerms, lagrangian_hessian
-from .visual import (Correspondences, SurfaceModel, correspond, surface_model, fixed_subsample, point_to_plane, pseudo_huber,
-                     robust_value, z_vector)
+from .visual import Correspondences, SurfaceModel, correspond, surface_model, fixed_subsample, pseudo_huber, robust_value, z_vector
 
 ENERGY_MODES = ("soft", "hard", "off")
 # Prior spread of log(inertia ratio): the robust mesh inertia (perception/mass.py) came within
@@ -376,25 +375,18 @@ def correspondences(data: ScrewData, state: ScrewState, size: int, seed: int = 0
     return out
 
 
-def residual_gate(data: ScrewData, state: ScrewState, corr: dict[str, list[Correspondences]]) -> float:
+def residual_gate(data: ScrewData, corr: dict[str, list[Correspondences]]) -> float:
     """The outlier cut-off 3σ̂ [m] (:data:`PLANE_GATE_SIGMAS`; at least ``data.delta``) of the
-    point-to-plane residuals of the gated pairs ``corr`` under the motion of ``state``, σ̂ =
-    1.4826 × their median absolute value (the normal-consistent scale, robust to the outliers).
+    point-to-plane residuals of the gated pairs ``corr`` (under the motion they were made at),
+    σ̂ = 1.4826 × their median absolute value (the normal-consistent scale, robust to the outliers).
 
     Why: the nearest-point gate (``data.gate``, two ICP inlier distances) admits the near edge of
     surfaces the zero-step model lacks (a door's inner face once it opens: half of
     protocol_microwave_0's door points at 90°); under the true motion the modelled points sit
     within ~2 mm, and the admitted tail pulled the vis-only axis 0.26° (closed form) -> 0.75°
     off; gated at 3σ̂ (8.9 mm) it ends 0.33° off."""
-    model = state_model(data, state)
-    cols = np.searchsorted(state.t, data.times)
-    res = []
-    for link, items in corr.items():
-        Ts = transforms_world0_t(model, link, state.q[cols])
-        for c, T in zip(items, Ts):
-            r = point_to_plane(T, c.targets, c.normals, c.observed)
-            res.append(r[c.weights > 0])
-    r = np.concatenate(res) if res else np.zeros(0)
+    gated = [c.residuals[c.weights > 0] for items in corr.values() for c in items]
+    r = np.concatenate(gated) if gated else np.zeros(0)
     if r.size < 10:
         return np.inf
     # never below the Huber width (the point noise level): exact points leave σ̂ ≈ 0
@@ -977,10 +969,10 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     ``data.delta``; stops early once a round moves nothing), the gated warm-up (as many rounds,
     pairs beyond :func:`residual_gate` of the settled fit left out) then the full objective on
     the dense grid (correspondences refreshed once more, gated); without coarse-to-fine, one full
-    solve with the correspondences of the closed form.  A stage that does not converge is recorded (``success``
-    False, IPOPT's status kept); its last iterate is kept (``accepted``) only if its robust visual
-    term is no worse than before the stage (within :data:`VIS_SLACK`), else the next stage starts
-    from the previous state.  The re-weighted full solve is kept only when it converges."""
+    solve with the correspondences of the closed form.  A stage that does not converge is
+    recorded (``success`` False, IPOPT's status kept); its last iterate is kept (``accepted``)
+    only if its robust visual term is no worse than before the stage (within :data:`VIS_SLACK`),
+    else the next stage starts from the previous state.  The re-weighted full solve is kept only when it converges."""
     options = options or ScrewOptions()
     start = time.perf_counter()
     state = initial_state(data)
@@ -1031,7 +1023,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                     break
         # the settled fit's own residual scale now sets how far off its tangent plane a pair may
         # be; warm up again with the pairs it leaves
-        plane_gate = residual_gate(data, state, correspondences(data, state, size))
+        plane_gate = residual_gate(data, correspondences(data, state, size))
         for r in range(options.rounds):
             before = (state.axes.copy(), state.origins.copy(), state.q.copy())
             run(f"vis_gated_{r + 1}", correspondences(data, state, size, plane_gate=plane_gate), dense=False)

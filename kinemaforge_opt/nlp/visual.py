@@ -94,7 +94,8 @@ def point_to_plane(T_world0_t, x0, n0, y):
 class Correspondences:
     """For one part and one time step: observed points (3, N) [m], their surface points and
     normals (3, N) at the zero configuration, gate weights (N,) (0 = rejected or padding), IRLS
-    weights (N,) and the moment matrix H (13, 13) of the gated, IRLS-weighted pairs."""
+    weights (N,), the moment matrix H (13, 13) of the gated, IRLS-weighted pairs and the
+    point-to-plane residuals (N,) [m] under the motion the pairs were made at."""
 
     observed: np.ndarray
     targets: np.ndarray
@@ -102,6 +103,7 @@ class Correspondences:
     weights: np.ndarray
     irls: np.ndarray
     H: np.ndarray
+    residuals: np.ndarray
 
 
 def linear_rows(observed: np.ndarray, targets: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -153,7 +155,7 @@ def correspond(observed_world: np.ndarray, T_world0_t: np.ndarray, surface: Surf
     r = A @ z_vector(T_world0_t)
     w[:m] = ((d <= gate) & (np.abs(r[:m]) <= plane_gate)).astype(float)
     irls = w / np.sqrt(1.0 + (r / delta) ** 2)
-    return Correspondences(obs, tgt, nrm, w, irls, (A * irls[:, None]).T @ A)
+    return Correspondences(obs, tgt, nrm, w, irls, (A * irls[:, None]).T @ A, r)
 
 
 def robust_value(c: Correspondences, T_world0_t: np.ndarray, delta: float) -> float:

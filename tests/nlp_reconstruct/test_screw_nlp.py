@@ -109,7 +109,7 @@ def test_the_residual_gate_is_three_standard_deviations_of_the_point_noise(sigma
     true, data, q = _noisy_door(lambda n: np.ones(len(n), bool), sigma)
     exact = dataclasses.replace(data, model=true, q_init=q[:, None])
     state = initial_state(exact)
-    gate = residual_gate(exact, state, correspondences(exact, state, 200))
+    gate = residual_gate(exact, correspondences(exact, state, 200))
     assert gate == pytest.approx(3 * sigma, rel=0.1)
 
 
