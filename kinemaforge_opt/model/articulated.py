@@ -134,8 +134,11 @@ class JointDynamics:
 
     Passive generalised force (see :mod:`kinemaforge_opt.physics.effects` for each term):
     -damping·v - coulomb·sign(v) - stribeck·exp(-(v/v_stribeck)²)·sign(v)
-    - spring_stiffness·(q - spring_rest) + bias - drag·v·|v|;
-    armature adds to the joint-space inertia diagonal (kg·m² or kg).
+    - spring_stiffness·(q - spring_rest) + bias - drag·v·|v|
+    - limit_stiffness·max(limit_side·(q - limit_stop), 0)·limit_side;
+    armature adds to the joint-space inertia diagonal (kg·m² or kg).  The last term is a stop
+    found by ``diagnose`` (limit contact): a one-sided spring beyond ``limit_stop`` [rad or m],
+    above the motion (``limit_side`` +1) or below it (-1); off while ``limit_stiffness`` is 0.
     """
 
     damping: float = 0.0
@@ -147,25 +150,31 @@ class JointDynamics:
     v_stribeck: float = 0.01
     bias: float = 0.0
     drag: float = 0.0
+    limit_stop: float = 0.0
+    limit_stiffness: float = 0.0
+    limit_side: float = 1.0
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
             if not np.isfinite(v):
                 raise ModelError(f"joint dynamics {f.name} must be finite, got {v}")
-            if f.name not in ("spring_rest", "bias") and v < 0:
+            if f.name not in ("spring_rest", "bias", "limit_stop", "limit_side") and v < 0:
                 raise ModelError(f"joint dynamics {f.name} must be >= 0, got {v}")
             object.__setattr__(self, f.name, float(v))
         if self.v_stribeck <= 0:
             raise ModelError(f"joint dynamics v_stribeck must be > 0, got {self.v_stribeck}")
+        if self.limit_side not in (1.0, -1.0):
+            raise ModelError(f"joint dynamics limit_side must be +1 (upper stop) or -1 (lower stop), got {self.limit_side}")
 
     def passive_force(self, q, v):
         """Generalised passive force at (q, v); numpy arrays or casadi symbols (smooth sign)."""
-        from ..physics.effects import EFFECTS, dynamics_effects
+        from ..physics.effects import EFFECTS, dynamics_effects, effect_arguments
 
         total = 0 * v
         for t in dynamics_effects(self):
-            total = total + EFFECTS[t].force(q, v, *(getattr(self, p) for p in EFFECTS[t].params))
+            args, kwargs = effect_arguments(self, t)
+            total = total + EFFECTS[t].force(q, v, *args, **kwargs)
         return total
 
 

@@ -177,6 +177,7 @@ class JointSpaceFit:
     sigma_v: np.ndarray | None
     substeps: int
     segment_starts: tuple[int, ...]  # grid columns whose state is free (no defect leads into them)
+    stop_side: dict[str, tuple[float, float]]  # per joint, (side, initial position) of its limit-contact stop
     defect: ca.Function  # (xk, xk1, uk, uk1, h, theta, phi) -> (defect, work, dE)
     theta_names: tuple[str, ...]
     phi_layout: tuple[tuple[str, str], ...]  # (joint, force param) per entry of phi
@@ -255,7 +256,9 @@ def build_joint_space_fit(
         n[: -len("_ratio")] for n in free if n in ratio_names and n[: -len("_ratio")] not in free
     )
     dyn = build_dynamics(model, free=theta_names)
-    stop_side = {**limit_side(model, rec), **(limit_stops or {})}
+    held = {j.name: (j.dynamics.limit_side, j.dynamics.limit_stop) for j in model.movable_joints
+            if j.dynamics.limit_stiffness > 0}  # stops the model already holds
+    stop_side = {**limit_side(model, rec), **held, **(limit_stops or {})}
     scales = data_scales(model, rec)
     n = model.nq
 
@@ -398,7 +401,7 @@ def build_joint_space_fit(
 
     return JointSpaceFit(
         problem=prob, model=model, recording=rec, blocks=blocks, effects=effects, dynamics=dyn,
-        sigma_q=sq, sigma_v=sv, substeps=m, segment_starts=segment_starts, defect=interval, theta_names=theta_names, phi_layout=tuple(phi_layout),
+        sigma_q=sq, sigma_v=sv, substeps=m, segment_starts=segment_starts, stop_side=stop_side, defect=interval, theta_names=theta_names, phi_layout=tuple(phi_layout),
         phi_fixed=phi_fixed, phi_free=phi_free,
         defects=ca.Function("defects", [X, z_all], [ca.vec(D)]),
         residuals=ca.Function("residuals", [X], [ca.vertcat(*outputs)]),

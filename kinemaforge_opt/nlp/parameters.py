@@ -62,15 +62,17 @@ def force_parameter_names(model: ArticulatedModel) -> tuple[str, ...]:
 
 
 def nominal_force_parameters(model: ArticulatedModel, joint: str) -> dict[str, float]:
-    """The model's value of every force parameter of ``joint`` (limit stop defaults to the upper
-    limit, its stiffness to 0, i.e. no contact)."""
+    """The model's value of every force parameter of ``joint`` (a limit stop the dynamics do not
+    hold defaults to the upper limit, its stiffness to 0, i.e. no contact)."""
     j = model.joint(joint)
     d = j.dynamics
     upper = j.limits.upper if j.limits is not None and np.isfinite(j.limits.upper) else 0.0
+    if d.limit_stiffness > 0:
+        upper = d.limit_stop
     return {
         "damping": d.damping, "coulomb": d.coulomb, "stribeck": d.stribeck, "v_stribeck": d.v_stribeck,
         "spring_stiffness": d.spring_stiffness, "spring_rest": d.spring_rest, "bias": d.bias,
-        "drag": d.drag, "limit_stop": upper, "limit_stiffness": 0.0,
+        "drag": d.drag, "limit_stop": upper, "limit_stiffness": d.limit_stiffness,
     }
 
 

@@ -422,12 +422,12 @@ def screen_scores(model: ArticulatedModel, pending: list[tuple[str, str]], selec
     return out
 
 
-def _model_of(model: ArticulatedModel, trial: Trial) -> ArticulatedModel:
-    """``model`` with the free parameters of ``trial`` at their fitted values (limit contact is
-    not part of an ArticulatedModel and is left out)."""
+def _model_of(model: ArticulatedModel, trial: Trial, stops: dict) -> ArticulatedModel:
+    """``model`` with the free parameters of ``trial`` at their fitted values (a limit contact's
+    stop on the side :func:`limit_stop_guess` gave it)."""
     from ..calibration import apply_parameters
 
-    return apply_parameters(model, {n: trial.values[n] for n in trial.free})
+    return apply_parameters(model, {n: trial.values[n] for n in trial.free}, {j: s for j, (s, _) in stops.items()})
 
 
 def _rss_q(q_fit: np.ndarray, q_rec: np.ndarray, sigma_q: np.ndarray) -> float:
@@ -643,7 +643,7 @@ def diagnose(
         names = [n for j, e in effects_ for n in _free_for(model, j, e)]
         return fit_for(effects_).solve(names, start=start, bounds={n: b for n, b in (start.bounds or {}).items() if n in names})
 
-    nominal_model = _model_of(model, nominal_trial)
+    nominal_model = _model_of(model, nominal_trial, stops)
     # The prediction gate's judge (``prediction_gate``): the first other recording whose nominal
     # prediction errs by THRESHOLD_SIGMA noise sigmas or more, found on first use.
     judge: dict = {}
@@ -676,10 +676,10 @@ def diagnose(
         if js is None:
             return None
         name, span = js
-        base = prediction_rms_sigma(_model_of(model, current), span)
+        base = prediction_rms_sigma(_model_of(model, current, stops), span)
         for r in rows_:
             say(f"predicting {_span_words(name)} with {r['type']} on {r['joint']}")
-            new = prediction_rms_sigma(_model_of(model, r["trial"]), span)
+            new = prediction_rms_sigma(_model_of(model, r["trial"], stops), span)
             ok_ = base - new >= MIN_EFFECT_SIZE_SIGMA
             tested.append({"prediction_gate": f"{r['type']} on {r['joint']}", "span": name,
                            "prediction_rms_sigma": [base, new], "passed": ok_})
@@ -815,9 +815,9 @@ def diagnose(
                 # one whose set predicts that recording at least as well (the fit span's ΔBIC
                 # cannot tell polishing from physics here: that is why it was judged so).
                 name, span = judge_span()
-                base = prediction_rms_sigma(_model_of(model, current), span)
+                base = prediction_rms_sigma(_model_of(model, current, stops), span)
                 for sw in swaps:
-                    new = prediction_rms_sigma(_model_of(model, sw[3]), span)
+                    new = prediction_rms_sigma(_model_of(model, sw[3], stops), span)
                     tested.append({"prediction_gate": f"{sw[2]} on {sw[1]} in place of {selected[i][1]} on {selected[i][0]}",
                                    "span": name, "prediction_rms_sigma": [base, new], "passed": new <= base})
                     if new <= base:
@@ -863,7 +863,7 @@ def diagnose(
         nonlocal current
         while droppable:
             say(doing.format(n=len(selected)))
-            h = first or predict_before_after(nominal_model, _model_of(model, current), span, span_s)
+            h = first or predict_before_after(nominal_model, _model_of(model, current, stops), span, span_s)
             first = None
             tested.append({check: [f"{e} on {j}" for j, e, _ in selected], rms_key: [h.rms_before, h.rms_after]})
             if h.rms_after < h.rms_before:
@@ -903,7 +903,7 @@ def diagnose(
         signal = {}
         for name, span in spans:
             say(f"checking whether the {_span_words(name)} can judge the effects")
-            h = predict_before_after(nominal_model, _model_of(model, current), span, segment_s)
+            h = predict_before_after(nominal_model, _model_of(model, current, stops), span, segment_s)
             signal[name] = prediction_signal(h, sigma_signal)
             if signal[name] < THRESHOLD_SIGMA:
                 continue
@@ -1096,13 +1096,14 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
 
     # Per joint, its passive force terms (the model's joint dynamics, then the extra law), looked
     # up once: the right-hand side runs ~10^4 times per simulated second.
-    from .effects import EFFECTS, dynamics_effects
+    from .effects import EFFECTS, dynamics_effects, effect_arguments
 
-    terms = [[(EFFECTS[e].force, tuple(getattr(j.dynamics, p) for p in EFFECTS[e].params))
-              for e in dynamics_effects(j.dynamics)] for j in joints]
+    terms = [[(EFFECTS[e].force, *effect_arguments(j.dynamics, e)) for e in dynamics_effects(j.dynamics)]
+             for j in joints]
     # tau linear between samples (held at the ends): per interval i its start and slope
     t_list, last = rec.t.tolist(), rec.t.size - 1
     slope = np.diff(tau, axis=0) / np.diff(rec.t)[:, None]
+    max_step = float(np.min(np.diff(rec.t)))
     out = np.empty(2 * n)
 
     def rhs(t, x):
@@ -1110,8 +1111,8 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
         i = min(max(bisect_right(t_list, t) - 1, 0), last - 1)
         u = tau[i] + slope[i] * min(max(t - t_list[i], 0.0), t_list[i + 1] - t_list[i])
         for k in range(n):
-            for force, params in terms[k]:
-                u[k] += force(q[k], v[k], *params)
+            for force, params, kwargs in terms[k]:
+                u[k] += force(q[k], v[k], *params, **kwargs)
             if laws[k] is not None:
                 u[k] += laws[k](q[k], v[k])
         out[:n] = v
@@ -1119,7 +1120,10 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
         return out.copy()
 
     def run(x0: np.ndarray, t_eval: np.ndarray) -> np.ndarray:
-        sol = solve_ivp(rhs, (t_eval[0], t_eval[-1]), x0, t_eval=t_eval, method="LSODA", rtol=SIM_RTOL, atol=SIM_ATOL)
+        # max_step: one sample interval, so a force pulse after a free coast is never stepped over
+        # (LSODA grows its step on the smooth, force-free stretch and jumped whole pushes)
+        sol = solve_ivp(rhs, (t_eval[0], t_eval[-1]), x0, t_eval=t_eval, method="LSODA", rtol=SIM_RTOL, atol=SIM_ATOL,
+                        max_step=max_step)
         q = sol.y[:n].T
         if q.shape[0] < t_eval.size:  # integration stopped early: hold the last state
             q = np.vstack([q, np.repeat(q[-1:], t_eval.size - q.shape[0], axis=0)])

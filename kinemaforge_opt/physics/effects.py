@@ -30,7 +30,9 @@ def smooth_sign(v, eps: float = V_SMOOTH):
     """tanh(v / eps): a differentiable sign(v)."""
     if isinstance(v, float):  # a scalar (simulations call this ~10^4 times a second)
         return math.tanh(v / eps)
-    return ca.tanh(v / eps) if _is_symbolic(v) else np.tanh(np.asarray(v) / eps)
+    if _is_symbolic(v):
+        return ca.tanh(v / eps)
+    return np.tanh(np.asarray(v) / eps)
 
 
 def _exp(x):
@@ -94,8 +96,8 @@ def _limit_contact(q, v, stop, k, eps=V_SMOOTH, side=1.0):
     x = s * side * (q - stop)
     if _is_symbolic(x):  # overflow-free softplus: max(x, 0) + log(1 + exp(-|x|))
         ramp = (ca.fmax(x, 0) + ca.log(1 + ca.exp(-ca.fabs(x)))) / s
-    else:
-        ramp = np.logaddexp(0.0, x) / s
+    else:  # the same overflow-free form (numpy arrays, or Drake expressions: no logaddexp there)
+        ramp = (0.5 * (x + np.abs(x)) + np.log(1 + np.exp(-np.abs(x)))) / s
     return -side * k * ramp
 
 
@@ -128,8 +130,17 @@ FORCE_EFFECTS = tuple(t for t, e in EFFECTS.items() if e.force is not None)
 
 def dynamics_effects(dynamics) -> tuple[str, ...]:
     """Force effects a :class:`~kinemaforge_opt.model.JointDynamics` switches on: those whose
-    parameters are its fields and whose first parameter (the reported value) is non-zero."""
-    return tuple(
-        t for t in FORCE_EFFECTS
-        if hasattr(dynamics, EFFECTS[t].params[0]) and getattr(dynamics, EFFECTS[t].params[0])
-    )
+    parameters are its fields and whose first parameter (the reported value) is non-zero; a
+    limit contact when its stiffness is (its stop may sit at q = 0)."""
+    def on(t: str) -> bool:
+        p = "limit_stiffness" if t == "limit_contact" else EFFECTS[t].params[0]
+        return bool(getattr(dynamics, p, 0.0))
+
+    return tuple(t for t in FORCE_EFFECTS if on(t))
+
+
+def effect_arguments(dynamics, effect_type: str) -> tuple[tuple[float, ...], dict]:
+    """(positional parameters, keyword arguments) of ``EFFECTS[effect_type].force`` as a
+    :class:`~kinemaforge_opt.model.JointDynamics` holds them (the stop's side for a limit contact)."""
+    args = tuple(getattr(dynamics, p) for p in EFFECTS[effect_type].params)
+    return args, ({"side": dynamics.limit_side} if effect_type == "limit_contact" else {})

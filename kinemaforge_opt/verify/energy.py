@@ -120,7 +120,9 @@ def energy_residual(model: ArticulatedModel, recording: Recording, stop_toleranc
     """Dimensionless energy-balance residual of ``recording`` under ``model``.
 
     With E the mechanical energy above, P_app = τ·v the applied power and
-    P_dis = −Σ_j (b_j v_j² + f_j |v_j|) the power of viscous damping and Coulomb friction, over
+    P_dis = −Σ_j (b_j v_j² + f_j |v_j|) + Σ_j F_j(q_j, v_j) v_j the power of viscous damping,
+    Coulomb friction and the joint's other non-spring forces F_j (Stribeck friction, bias, quadratic
+    drag, a found limit contact: :mod:`kinemaforge_opt.physics.effects`), over
     the stop-free segments s = [a_s, b_s] of the recording (:func:`free_segments`),
 
         r = Σ_s |ΔE_s − W_app,s − W_dis,s| / S,
@@ -147,7 +149,7 @@ def energy_residual(model: ArticulatedModel, recording: Recording, stop_toleranc
     b = np.array([d.damping for d in dyn])
     f = np.array([d.coulomb for d in dyn])
     p_app = np.sum(tau * v, axis=1)
-    p_dis = -(v**2 @ b + np.abs(v) @ f)
+    p_dis = -(v**2 @ b + np.abs(v) @ f) + _other_passive_power(dyn, rec.q, v)
     segments = free_segments(model, rec.q, v, stop_tolerance)
     if not segments:
         return float("nan")
@@ -164,6 +166,19 @@ def energy_residual(model: ArticulatedModel, recording: Recording, stop_toleranc
     if scale <= 0.0:
         return 0.0
     return num / scale
+
+
+def _other_passive_power(dynamics, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(T,) Σ_j F_j(q_j, v_j) v_j [W] of the joint forces other than damping, Coulomb friction and
+    springs (which the energy balance books on its own) that each joint's ``dynamics`` hold."""
+    from ..physics.effects import EFFECTS, dynamics_effects, effect_arguments
+
+    power = np.zeros(len(q))
+    for k, d in enumerate(dynamics):
+        for t in set(dynamics_effects(d)) - {"viscous_damping", "coulomb_friction", "spring"}:
+            args, kwargs = effect_arguments(d, t)
+            power += EFFECTS[t].force(q[:, k], v[:, k], *args, **kwargs) * v[:, k]
+    return power
 
 
 def model_ordered(model: ArticulatedModel, recording: Recording) -> Recording:

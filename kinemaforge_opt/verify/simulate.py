@@ -2,7 +2,7 @@
 
 The generalised force fed to the plant's applied-generalised-force input is
 
-    τ_in(t, v) = τ_rec(t) − f ⊙ tanh(v / v_eps)
+    τ_in(t, q, v) = τ_rec(t) − f ⊙ tanh(v / v_eps) + τ_other(q, v)
 
 - τ_rec: the recording's ``tau`` linearly interpolated in time (first-order hold), time measured
   from the recording's first sample; after its last sample the last value is held.
@@ -13,6 +13,9 @@ The generalised force fed to the plant's applied-generalised-force input is
   The discrete plant applies this force explicitly, which is stable only while the friction's
   slope f/v_eps stays below the joint inertia per step, so there v_eps is raised per joint to
   max(v_eps, 4·h·f_j/M_jj(q0)) with h the 1 ms step and M_jj the mass-matrix diagonal at q0.
+- τ_other: every other joint force of the model's dynamics that Drake's joints lack (Stribeck
+  friction, constant bias, quadratic drag, a limit contact found by ``diagnose``), the laws of
+  :mod:`kinemaforge_opt.physics.effects` with the same smooth sign.
 Damping, springs, armature and limits are in the plant (:mod:`.plant`).
 """
 
@@ -23,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.systems.analysis import Simulator
-from pydrake.symbolic import Variable, tanh
+from pydrake.symbolic import Expression, Variable
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Adder, SymbolicVectorSystem, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
@@ -31,6 +34,7 @@ from pydrake.trajectories import PiecewisePolynomial
 from ..errors import DataError, require_finite
 from ..io.recording import Recording
 from ..model import ArticulatedModel
+from ..physics.effects import EFFECTS, dynamics_effects, effect_arguments
 from .energy import mechanical_energy, model_ordered
 from .plant import DISCRETE_TIME_STEP_S, build_plant
 
@@ -117,15 +121,17 @@ def simulate_at(
     builder = DiagramBuilder()
     builder.AddSystem(plant)
     sources = []
-    coulomb = np.array([j.dynamics.coulomb for j in model.movable_joints])
-    if np.any(coulomb > 0):
+    dynamics = [j.dynamics for j in model.movable_joints]
+    if any(set(dynamics_effects(d)) - IN_PLANT for d in dynamics):
+        # smooth-sign width: the dry-friction level (Coulomb + Stribeck excess) sets the slope
+        dry = np.array([d.coulomb + d.stribeck for d in dynamics])
         eps = np.full(n, float(v_eps))
         if discrete:
             ctx = plant.CreateDefaultContext()
             plant.SetPositions(ctx, q0)
             M_diag = np.diag(plant.CalcMassMatrix(ctx))
-            eps = np.maximum(eps, 4.0 * DISCRETE_TIME_STEP_S * coulomb / M_diag)
-        sources.append(_friction_system(builder, plant, coulomb, eps, discrete))
+            eps = np.maximum(eps, 4.0 * DISCRETE_TIME_STEP_S * dry / M_diag)
+        sources.append(_joint_force_system(builder, plant, dynamics, eps, discrete))
     if tau is not None:
         sources.append(builder.AddSystem(TrajectorySource(_force_trajectory(tau, t_out[-1]))).get_output_port())
     if sources:
@@ -159,8 +165,14 @@ def simulate_at(
     return Trajectory(t_out, model.joint_names, q, v, mechanical_energy(model, q, v), wall)
 
 
-def _friction_system(builder: DiagramBuilder, plant, coulomb: np.ndarray, eps: np.ndarray, discrete: bool):
-    """Output port of a symbolic system x = [q; v] -> −f ⊙ tanh(v / eps), fed by the plant state.
+IN_PLANT = frozenset({"viscous_damping", "spring"})
+"""Joint force effects the Drake plant holds itself (joint damping, spring force elements)."""
+
+
+def _joint_force_system(builder: DiagramBuilder, plant, dynamics, eps: np.ndarray, discrete: bool):
+    """Output port of a symbolic system x = [q; v] -> per joint the sum of the force laws of its
+    dynamics that are not :data:`IN_PLANT` (smooth sign of width ``eps`` (n,)), fed by the plant
+    state.
 
     Evaluated in C++ (a Python LeafSystem cost ~3 s per 50 s of 1 ms steps).  Drake's
     SymbolicVectorSystem needs a state, so it carries one inert variable (z' = 0, or z+ = z with
@@ -168,7 +180,10 @@ def _friction_system(builder: DiagramBuilder, plant, coulomb: np.ndarray, eps: n
     nq, nv = plant.num_positions(), plant.num_velocities()
     x = [Variable(f"x{i}") for i in range(nq + nv)]
     z = Variable("inert")
-    out = [-coulomb[i] * tanh(x[nq + i] / eps[i]) for i in range(nv)]
+    # numpy's object loops (tanh, exp, log on Drake expressions) report stale floating-point flags
+    # as "invalid value" warnings; the expressions themselves are exact
+    with np.errstate(invalid="ignore"):
+        out = [_joint_force(d, x[i], x[nq + i], float(eps[i])) for i, d in enumerate(dynamics)]
     if discrete:
         system = SymbolicVectorSystem(state=[z], input=x, dynamics=[z], output=out,
                                       time_period=DISCRETE_TIME_STEP_S)
@@ -177,6 +192,15 @@ def _friction_system(builder: DiagramBuilder, plant, coulomb: np.ndarray, eps: n
     builder.AddSystem(system)
     builder.Connect(plant.get_state_output_port(), system.get_input_port())
     return system.get_output_port()
+
+
+def _joint_force(dynamics, q: Variable, v: Variable, eps: float) -> Expression:
+    """The sum of the force laws of ``dynamics`` not :data:`IN_PLANT`, as a Drake expression."""
+    total = Expression(0.0)
+    for t in sorted(set(dynamics_effects(dynamics)) - IN_PLANT):
+        args, kwargs = effect_arguments(dynamics, t)
+        total = total + np.asarray(EFFECTS[t].force(Expression(q), Expression(v), *args, eps=eps, **kwargs)).item()
+    return total
 
 
 def _force_trajectory(tau: Recording, t_end: float) -> PiecewisePolynomial:

@@ -29,8 +29,10 @@ def _arm():
 
 def _result():
     scores = [
-        CaseScore("effect_door_spring", "diagnose", ("spring",), ("spring",), 1, 0, 0, {"spring": 0.02}, 0.04, 0.004, 5.0),
-        CaseScore("effect_door_spring", "ID-LS", ("spring",), ("constant_bias",), 0, 1, 1, {}, 0.04, 0.05, 0.01),
+        CaseScore("effect_door_spring", "diagnose", ("spring",), ("spring",), 1, 0, 0, {"spring": 0.02}, 0.04, 0.004, 5.0,
+                  other_rms_before=0.4, other_rms_after=0.004),
+        CaseScore("effect_door_spring", "ID-LS", ("spring",), ("constant_bias",), 0, 1, 1, {}, 0.04, 0.05, 0.01,
+                  other_rms_before=0.4, other_rms_after=0.5),
         CaseScore("null_door", "diagnose", (), (), 0, 0, 0, {}, 0.01, 0.01, 3.0),
         CaseScore("null_door", "ID-LS", (), ("viscous_damping",), 0, 1, 0, {}, 0.01, 0.02, 0.01),
     ]
@@ -52,6 +54,8 @@ def test_summary_scores():
     assert s["diagnose"]["f1"] == 1.0 and s["diagnose"]["null_false_positives"] == 0
     assert s["ID-LS"]["f1"] == 0.0 and s["ID-LS"]["null_false_positives"] == 1
     assert s["diagnose"]["median_heldout_gain"] == 10.0
+    assert s["diagnose"]["median_other_gain"] == 100.0 and s["diagnose"]["other_gain_at_bar"] == 1.0
+    assert s["ID-LS"]["median_other_gain"] == 0.8 and s["ID-LS"]["other_gain_at_bar"] == 0.0
 
 
 def test_supported_cases_leave_out_only_effects_the_recording_does_not_show():

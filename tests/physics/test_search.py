@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from kinemaforge_opt.io.recording import Recording
+from kinemaforge_opt.model import parse_urdf, urdf_string
 from kinemaforge_opt.nlp.joint_space import match_recording, noise_std
 from kinemaforge_opt.physics.diagnose import CANDIDATES, diagnose
 from kinemaforge_opt.physics.search import HypothesisFit, effect_parameters
@@ -103,6 +104,10 @@ def test_finds_a_hidden_stop_where_the_recording_turns():
     d = diagnose(model, rec)
     assert [e.type for e in d.effects] == ["limit_contact"], d.summary()
     assert d.effects[0].value == pytest.approx(1.2, abs=0.02)
+    # the augmented model holds the stop (an upper one, with its stiffness), through a URDF too
+    dyn = d.model.joint(joint).dynamics
+    assert (dyn.limit_stop, dyn.limit_side) == (pytest.approx(1.2, abs=0.02), 1.0) and dyn.limit_stiffness > 0
+    assert parse_urdf(urdf_string(d.model)).joint(joint).dynamics == dyn
 
 
 def test_prismatic_tilt_is_reported_with_its_equivalent_bias():

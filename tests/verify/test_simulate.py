@@ -56,6 +56,36 @@ def test_coulomb_friction_stops_slider_at_analytic_distance(discrete):
     assert abs(tr.v[-1, 0]) < 1e-6
 
 
+@pytest.mark.parametrize("discrete, atol", [(False, 1e-6), (True, 2e-3)])
+def test_a_constant_bias_accelerates_the_slider_uniformly(discrete, atol):
+    # Drake's joints hold no constant force: it enters as an applied force, x = v0 t + c t² / (2m)
+    m, c, v0 = 2.0, -1.2, 0.5
+    tr = simulate(slider(m, bias=c), [0.0], [v0], 1.0, dt_out=0.01, discrete=discrete)
+    np.testing.assert_allclose(tr.q[:, 0], v0 * tr.t + c * tr.t**2 / (2 * m), atol=atol)
+
+
+@pytest.mark.parametrize("discrete, atol", [(False, 1e-6), (True, 2e-3)])
+def test_quadratic_drag_slows_the_slider_hyperbolically(discrete, atol):
+    # m v' = -d v|v| from v0 > 0: v = v0 / (1 + d v0 t / m), x = (m/d) ln(1 + d v0 t / m)
+    m, d, v0 = 2.0, 4.0, 1.5
+    tr = simulate(slider(m, drag=d), [0.0], [v0], 2.0, dt_out=0.01, discrete=discrete)
+    np.testing.assert_allclose(tr.v[:, 0], v0 / (1 + d * v0 * tr.t / m), atol=atol)
+    np.testing.assert_allclose(tr.q[:, 0], m / d * np.log1p(d * v0 * tr.t / m), atol=atol)
+
+
+def test_a_found_limit_stop_reflects_the_slider_like_a_spring():
+    # beyond the stop at 0.1 m a 2000 N/m one-sided spring: the slider arriving at v0 turns back
+    # after half a period pi sqrt(m/k) and leaves at -v0 (no damping); the stop's 0.5-mm rounding
+    # shifts the contact slightly, hence the tolerances
+    m, k, stop, v0 = 2.0, 2000.0, 0.1, 0.5
+    model = slider(m, limit_stop=stop, limit_stiffness=k, limit_side=1.0)
+    tr = simulate(model, [0.0], [v0], 0.6, dt_out=1e-4, discrete=False)
+    assert tr.q[:, 0].max() == pytest.approx(stop + v0 * np.sqrt(m / k), abs=1e-3)
+    assert tr.v[-1, 0] == pytest.approx(-v0, rel=1e-3)
+    inside = tr.q[:, 0] > stop
+    assert tr.t[inside][-1] - tr.t[inside][0] == pytest.approx(np.pi * np.sqrt(m / k), rel=0.05)
+
+
 def test_start_just_past_a_limit_is_no_kick():
     # a measured q0 a noise-width (0.7 mrad) below a fitted lower limit, at rest, no force on a
     # horizontal slider: it must stay at rest (Drake's stiff limit constraint used to kick it)
@@ -79,6 +109,15 @@ def test_energy_residual_balances_damping_work():
     rec = Recording(tr.t, tr.joint_names, tr.q, tr.v)
     assert energy_residual(model, rec) < 1e-3
     assert energy_residual(pendulum(0.5, damping=0.0), rec) > 0.5
+
+
+def test_energy_residual_books_the_work_of_bias_and_drag():
+    # a slider pushed by a constant force against quadratic drag: E changes by the work of both
+    model = slider(2.0, bias=1.5, drag=3.0)
+    tr = simulate(model, [0.0], [2.0], 3.0, dt_out=0.002, discrete=False)
+    rec = Recording(tr.t, tr.joint_names, tr.q, tr.v)
+    assert energy_residual(model, rec) < 1e-3
+    assert energy_residual(slider(2.0, drag=3.0), rec) > 0.1
 
 
 def test_plant_matches_pinocchio_on_a_tree_with_every_joint_kind():
