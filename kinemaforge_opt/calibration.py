@@ -205,7 +205,8 @@ def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: floa
     rms = np.sqrt(np.mean((X[:n, :].T - rec.q) ** 2, axis=0))
     return Calibration(
         success=res.success, status=res.status, iterations=res.iterations, estimates=estimates,
-        model=apply_parameters(model, values, {j: side for j, (side, _) in fit.stop_side.items()}), effects=fit.effects, identifiability=tuple(words),
+        model=apply_parameters(model, values, {j: side for j, (side, _) in fit.stop_side.items()}),
+        effects=fit.effects, identifiability=tuple(words),
         costs=res.costs, violations=res.violations, rms_q=dict(zip(model.joint_names, map(float, rms))),
         q_fit=X[:n, :].T.copy(), v_fit=X[n:, :].T.copy(), recording=rec, solve_time_s=elapsed,
     )

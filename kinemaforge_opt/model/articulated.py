@@ -165,7 +165,8 @@ class JointDynamics:
         if self.v_stribeck <= 0:
             raise ModelError(f"joint dynamics v_stribeck must be > 0, got {self.v_stribeck}")
         if self.limit_side not in (1.0, -1.0):
-            raise ModelError(f"joint dynamics limit_side must be +1 (upper stop) or -1 (lower stop), got {self.limit_side}")
+            raise ModelError(
+                f"joint dynamics limit_side must be +1 (upper stop) or -1 (lower stop), got {self.limit_side}")
 
     def passive_force(self, q, v):
         """Generalised passive force at (q, v); numpy arrays or casadi symbols (smooth sign)."""

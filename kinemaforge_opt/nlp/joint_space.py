@@ -401,7 +401,8 @@ def build_joint_space_fit(
 
     return JointSpaceFit(
         problem=prob, model=model, recording=rec, blocks=blocks, effects=effects, dynamics=dyn,
-        sigma_q=sq, sigma_v=sv, substeps=m, segment_starts=segment_starts, stop_side=stop_side, defect=interval, theta_names=theta_names, phi_layout=tuple(phi_layout),
+        sigma_q=sq, sigma_v=sv, substeps=m, segment_starts=segment_starts, stop_side=stop_side,
+        defect=interval, theta_names=theta_names, phi_layout=tuple(phi_layout),
         phi_fixed=phi_fixed, phi_free=phi_free,
         defects=ca.Function("defects", [X, z_all], [ca.vec(D)]),
         residuals=ca.Function("residuals", [X], [ca.vertcat(*outputs)]),
