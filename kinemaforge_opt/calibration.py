@@ -87,10 +87,11 @@ class Calibration:
 
 
 def apply_parameters(model: ArticulatedModel, values: dict[str, np.ndarray],
-                     stop_sides: dict[str, float] | None = None) -> ArticulatedModel:
+                     stops: dict[str, tuple[float, float]] | None = None) -> ArticulatedModel:
     """A copy of ``model`` with the named parameter blocks set to ``values`` (physical units).
-    stop_sides: per joint, the side (+1 upper, -1 lower) of a fitted ``limit_stop`` (default: the
-    side the joint's dynamics already hold)."""
+    stops: per joint, (side, initial position) of its limit-contact stop as the fit had it (side
+    +1 upper, -1 lower); a fitted ``limit_stop`` takes that side (default: the side the joint's
+    dynamics already hold)."""
     out = model
     for name, value in values.items():
         value = np.asarray(value, dtype=float)
@@ -100,8 +101,8 @@ def apply_parameters(model: ArticulatedModel, values: dict[str, np.ndarray],
         elif field in FORCE_PARAMS:
             j = out.joint(owner)
             changes = {field: float(value[0])}
-            if field == "limit_stop" and stop_sides and owner in stop_sides:
-                changes["limit_side"] = float(stop_sides[owner])
+            if field == "limit_stop" and stops and owner in stops:
+                changes["limit_side"] = float(stops[owner][0])
             out = out.with_joint(owner, dynamics=dataclasses.replace(j.dynamics, **changes))
         elif field == "axis":
             out = out.with_joint(owner, axis=value / np.linalg.norm(value))
@@ -205,8 +206,7 @@ def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: floa
     rms = np.sqrt(np.mean((X[:n, :].T - rec.q) ** 2, axis=0))
     return Calibration(
         success=res.success, status=res.status, iterations=res.iterations, estimates=estimates,
-        model=apply_parameters(model, values, {j: side for j, (side, _) in fit.stop_side.items()}),
-        effects=fit.effects, identifiability=tuple(words),
+        model=apply_parameters(model, values, fit.stop_side), effects=fit.effects, identifiability=tuple(words),
         costs=res.costs, violations=res.violations, rms_q=dict(zip(model.joint_names, map(float, rms))),
         q_fit=X[:n, :].T.copy(), v_fit=X[n:, :].T.copy(), recording=rec, solve_time_s=elapsed,
     )

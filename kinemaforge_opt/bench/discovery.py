@@ -23,7 +23,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from ..physics.diagnose import DELTA_BIC, STATE_WINDOW_S, before_nominal_stops
+from ..physics.diagnose import DELTA_BIC, STATE_WINDOW_S, before_nominal_stops, simulate_segments
 from .baselines import BaselineResult, idls, sindy, split
 from .predict import augmented, predict
 from .recordings import effect_recording, other_recording
@@ -101,21 +101,14 @@ def _baseline_after(model, held, res: BaselineResult) -> float:
 
 def segment_rms(model, rec, laws: dict | None = None, segment_s: float = OTHER_SEGMENT_S) -> float:
     """RMS error [rad or m] of ``model`` (plus force ``laws``) predicting ``rec`` in ``segment_s``
-    pieces, each simulated from its own least-squares state over its first ``STATE_WINDOW_S``
-    (those samples are fitted, not scored).  A model whose simulation diverges (a baseline's
+    pieces (:func:`~kinemaforge_opt.physics.diagnose.simulate_segments`; the samples each piece's
+    starting state is fitted to are not scored).  A model whose simulation diverges (a baseline's
     fitted law can be unstable) scores inf."""
-    errors = []
-    for a in np.arange(rec.t[0], rec.t[-1], segment_s):
-        m = (rec.t >= a) & (rec.t < a + segment_s)
-        if m.sum() < 8:
-            continue
-        seg = rec.window(rec.t[m][0], rec.t[m][-1])
-        try:
-            q = predict(model, seg, laws, state_window_s=STATE_WINDOW_S)
-        except ValueError:  # least squares on non-finite residuals: the simulation diverged
-            return float("inf")
-        errors.append(q - seg.q)
-    return float(np.sqrt(np.nanmean(np.vstack(errors) ** 2)))
+    try:
+        q = simulate_segments(model, rec, segment_s, laws)
+    except ValueError:  # least squares on non-finite residuals: the simulation diverged
+        return float("inf")
+    return float(np.sqrt(np.nanmean((q - rec.q) ** 2)))
 
 
 def run_case(case: str, noise_seed: int = 0) -> list[CaseScore]:

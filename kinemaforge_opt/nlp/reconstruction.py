@@ -972,7 +972,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     solve with the correspondences of the closed form.  A stage that does not converge is
     recorded (``success`` False, IPOPT's status kept); its last iterate is kept (``accepted``)
     only if its robust visual term is no worse than before the stage (within :data:`VIS_SLACK`),
-    else the next stage starts from the previous state.  The re-weighted full solve is kept only when it converges."""
+    else the next stage starts from the previous state.  The re-weighted full solve is kept only
+    when it converges."""
     options = options or ScrewOptions()
     start = time.perf_counter()
     state = initial_state(data)

@@ -427,7 +427,7 @@ def _model_of(model: ArticulatedModel, trial: Trial, stops: dict) -> Articulated
     stop on the side :func:`limit_stop_guess` gave it)."""
     from ..calibration import apply_parameters
 
-    return apply_parameters(model, {n: trial.values[n] for n in trial.free}, {j: s for j, (s, _) in stops.items()})
+    return apply_parameters(model, {n: trial.values[n] for n in trial.free}, stops)
 
 
 def _rss_q(q_fit: np.ndarray, q_rec: np.ndarray, sigma_q: np.ndarray) -> float:
@@ -1036,22 +1036,30 @@ def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
     return rec.window(rec.t[0], rec.t[end - 1])
 
 
-def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec: Recording, segment_s: float | None) -> HeldOut:
-    """Simulated q of both models on ``rec`` (segment by segment when ``segment_s`` is given),
-    each from its own best state over the first ``STATE_WINDOW_S`` of a segment, scored after it."""
+def simulate_segments(model: ArticulatedModel, rec: Recording, segment_s: float | None,
+                      extra: dict | None = None) -> np.ndarray:
+    """q (T, n) of ``model`` (plus ``extra`` force laws, see :func:`simulate_recording`) on ``rec``,
+    segment by segment when ``segment_s`` [s] is given, each from its own best state over the
+    first ``STATE_WINDOW_S`` of a segment; NaN over those fitted samples and over a segment too
+    short to estimate a starting state."""
     edges = [rec.t[0]] if not segment_s else list(np.arange(rec.t[0], rec.t[-1], segment_s))
     edges.append(rec.t[-1] + 1e-9)
-    parts_b, parts_a = [], []
+    parts = []
     for a, b in zip(edges[:-1], edges[1:]):
         m = (rec.t >= a) & (rec.t < b)
-        if m.sum() < 8:  # too short to estimate a starting state: score the previous segment only
-            parts_b.append(np.full((m.sum(), rec.q.shape[1]), np.nan))
-            parts_a.append(parts_b[-1])
+        if m.sum() < 8:
+            parts.append(np.full((m.sum(), rec.q.shape[1]), np.nan))
             continue
         seg = rec.window(rec.t[m][0], rec.t[m][-1])
-        parts_b.append(simulate_recording(before, seg, state_window_s=STATE_WINDOW_S))
-        parts_a.append(parts_b[-1] if after is before else simulate_recording(after, seg, state_window_s=STATE_WINDOW_S))
-    q_b, q_a = np.vstack(parts_b), np.vstack(parts_a)
+        parts.append(simulate_recording(model, seg, extra, state_window_s=STATE_WINDOW_S))
+    return np.vstack(parts)
+
+
+def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec: Recording, segment_s: float | None) -> HeldOut:
+    """Simulated q of both models on ``rec`` (:func:`simulate_segments`), scored where both are
+    predictions."""
+    q_b = simulate_segments(before, rec, segment_s)
+    q_a = q_b if after is before else simulate_segments(after, rec, segment_s)
     ok = ~(np.isnan(q_b).any(axis=1) | np.isnan(q_a).any(axis=1))
     return HeldOut(rec.t[ok], rec.q[ok], q_b[ok], q_a[ok])
 

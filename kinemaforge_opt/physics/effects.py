@@ -30,9 +30,7 @@ def smooth_sign(v, eps: float = V_SMOOTH):
     """tanh(v / eps): a differentiable sign(v)."""
     if isinstance(v, float):  # a scalar (simulations call this ~10^4 times a second)
         return math.tanh(v / eps)
-    if _is_symbolic(v):
-        return ca.tanh(v / eps)
-    return np.tanh(np.asarray(v) / eps)
+    return ca.tanh(v / eps) if _is_symbolic(v) else np.tanh(np.asarray(v) / eps)
 
 
 def _exp(x):
