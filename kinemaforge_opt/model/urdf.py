@@ -82,11 +82,14 @@ def parse_urdf(text: str, source: str = "<string>") -> ArticulatedModel:
         ext = extensions.get(j.name, {})
         jtype = "helical" if ext.get("type") == "helical" else j.type
         dyn = j.dynamics
-        dynamics = JointDynamics(
-            damping=_f(dyn.damping if dyn else None),
-            coulomb=_f(dyn.friction if dyn else None),
-            **{k: _f(ext.get(k)) for k in _EXTENSION_DYNAMICS if k in ext},
-        )
+        try:
+            dynamics = JointDynamics(
+                damping=_f(dyn.damping if dyn else None),
+                coulomb=_f(dyn.friction if dyn else None),
+                **{k: _f(ext.get(k)) for k in _EXTENSION_DYNAMICS if k in ext},
+            )
+        except ModelError as e:  # name the file and joint the bad value belongs to
+            raise ModelError(f"{source}: joint {j.name!r}: {e}") from None
         limits = None
         if j.limit is not None and jtype != "fixed":
             lim = j.limit

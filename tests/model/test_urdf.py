@@ -98,6 +98,19 @@ BAD = [
         ModelError,
         r"joint 'j' axis must be a non-zero 3-vector",
     ),
+    (
+        '<robot name="r" xmlns:kinemaforge="https://kinemaforge.dev/urdf/1"><link name="base"/><link name="a"/>'
+        '<joint name="j" type="revolute"><parent link="base"/><child link="a"/><axis xyz="0 0 1"/>'
+        '<limit lower="0" upper="1" effort="1" velocity="1"/><kinemaforge:joint limit_side="0.5"/></joint></robot>',
+        ModelError,
+        r"bad\.urdf: joint 'j': joint dynamics limit_side must be \+1 \(upper stop\) or -1",
+    ),
+    (
+        _urdf('<link name="a"/><joint name="j" type="revolute"><parent link="base"/><child link="a"/><axis xyz="0 0 1"/>'
+              '<limit lower="0" upper="1" effort="1" velocity="1"/><dynamics damping="-0.2"/></joint>'),
+        ModelError,
+        r"bad\.urdf: joint 'j': joint dynamics damping must be >= 0",
+    ),
 ]
 
 
