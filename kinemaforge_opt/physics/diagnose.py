@@ -855,33 +855,47 @@ def diagnose(
 
     def drop_until_better(span: Recording, span_s: float | None, droppable: list[int], check: str, rms_key: str,
                           doing: str, stage: str, first: HeldOut | None = None) -> None:
-        """Drop selected effects, the last of ``droppable`` (indices into ``selected``) first,
-        until the selection simulates ``span`` better than the nominal model (or none is left).
+        """Drop selected effects until the selection simulates ``span`` better than the nominal
+        model (or none of ``droppable``, indices into ``selected``, is left): backward elimination,
+        each step dropping the effect whose removal (the rest re-fitted) simulates ``span`` best.
         ``doing``: progress text, formatted with the number of effects ``n``; ``stage``: the key
         of ``dropped`` the dropped effects are listed under; ``first``: the current selection's
         prediction of ``span`` if already made."""
         nonlocal current
-        while droppable:
-            say(doing.format(n=len(selected)))
-            h = first or predict_before_after(nominal_model, _model_of(model, current, stops), span, span_s)
-            first = None
+        keys = [selected[k][:2] for k in droppable]
+        say(doing.format(n=len(selected)))
+        h = first or predict_before_after(nominal_model, _model_of(model, current, stops), span, span_s)
+        while True:
             tested.append({check: [f"{e} on {j}" for j, e, _ in selected], rms_key: [h.rms_before, h.rms_after]})
-            if h.rms_after < h.rms_before:
+            if h.rms_after < h.rms_before or not keys:
                 return
-            joint, effect, _ = selected.pop(droppable.pop())
+            options = []  # (prediction, dropped effect, trial) per removal
+            for key in keys:
+                rest = [x[:2] for x in selected if x[:2] != key]
+                trial = trial_of(rest, nominal_trial) if rest else nominal_trial
+                if rest and not trial.success:
+                    continue
+                say(f"simulating the fit span without {key[1]} on {key[0]}")
+                after = _model_of(model, trial, stops) if rest else nominal_model
+                options.append((predict_before_after(nominal_model, after, span, span_s), key, trial))
+            if not options:
+                return
+            h, (joint, effect), current = min(options, key=lambda o: o[0].rms_after)
+            selected[:] = [x for x in selected if x[:2] != (joint, effect)]
+            keys.remove((joint, effect))
             dropped.setdefault(stage, []).append(f"{effect} on {joint}")
             say(f"dropped {effect} on {joint}: its simulation got no better")
             equivalents.pop((joint, effect), None)
-            current = trial_of([x[:2] for x in selected], nominal_trial) if selected else nominal_trial
+            if not selected:
+                return
 
     # The collocation fit lets states bend where the dynamics are soft, so a set of effects can
     # fit it without explaining the motion.  The selection must also simulate the fit span
     # better than the nominal model (in SIMULATION_CHECK_S pieces, each from its own best state:
     # open-loop replays of many seconds diverge for any model); if it does not, effects are
-    # dropped, last selected first, until it does (or none is left).  Limit contact is judged by
-    # the fit alone: it is not part of an ArticulatedModel, so the simulation cannot show it.
-    drop_until_better(srch, segment_s or SIMULATION_CHECK_S,
-                      [k for k, x in enumerate(selected) if x[1] != "limit_contact"],
+    # dropped, each time the one whose removal simulates the span best, until it does (or none
+    # is left).  A limit contact is judged like every other effect: the model holds its stop.
+    drop_until_better(srch, segment_s or SIMULATION_CHECK_S, list(range(len(selected))),
                       "simulation_check", "fit_span_simulated_rms", "simulating the fit span with {n} effect(s)",
                       "simulation_check")
 

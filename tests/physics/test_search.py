@@ -108,6 +108,12 @@ def test_finds_a_hidden_stop_where_the_recording_turns():
     dyn = d.model.joint(joint).dynamics
     assert (dyn.limit_stop, dyn.limit_side) == (pytest.approx(1.2, abs=0.02), 1.0) and dyn.limit_stiffness > 0
     assert parse_urdf(urdf_string(d.model)).joint(joint).dynamics == dyn
+    # the stop passed the simulation check like any effect: the model holds it, and it simulates
+    # the fit span better than the nominal model
+    (check,) = [t for t in d.tested if "simulation_check" in t]
+    assert check["simulation_check"] == [f"limit_contact on {joint}"]
+    before, after = check["fit_span_simulated_rms"]
+    assert after < before / 3, (before, after)
 
 
 def test_prismatic_tilt_is_reported_with_its_equivalent_bias():
