@@ -15,9 +15,10 @@ from ..io.tracks import read_sturm_log, read_tracks
 from ..perception.reconstruct import DEFAULT_DENSITY, reconstruct_sequence
 
 HELP = """\
-Infer the kinematic tree of an articulated object from part pose tracks and write
-OUT/reconstruction.json (joints: name, type, parent, child, axis_world, origin_world, pitch,
-radius for revolute/helical, confidence).
+Infer the kinematic tree of an articulated object from an RGB-D sequence or from part pose
+tracks and write OUT/reconstruction.json (joints: name, type, parent, child, axis_world,
+origin_world, pitch, radius for revolute/helical, confidence); from a sequence also a
+simulation-ready OUT/model.urdf, verified in Drake.
 
 INPUT is one of
   a sequence      a kinemaforge.rgbd/1 folder (sequence.json inside): depth -> point clouds ->
@@ -41,9 +42,12 @@ nothing moves is refused (exit 2) rather than given an invented joint.
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "reconstruct", help="pose tracks / Sturm logs -> kinematic tree (reconstruction.json)",
+        "reconstruct", help="RGB-D sequence, pose tracks or Sturm logs -> URDF + reconstruction.json",
         description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="examples:\n  kinemaforge reconstruct tracks.csv -o out/rec\n"
+        epilog="examples:\n  kinemaforge reconstruct out/demo/episode/sequence -o out/rec      (after `kinemaforge demo -o out/demo`)\n"
+        "  kinemaforge diagnose out/rec --sequence out/demo/episode/sequence -o out/rec_diag\n"
+        "  kinemaforge view out/rec\n"
+        "  kinemaforge reconstruct tracks.csv -o out/rec_tracks\n"
         "  kinemaforge reconstruct ../shared/data/real/articulation/mechanisms_iros_2010/drawer -o out/drawer\n",
     )
     p.add_argument("input", type=Path, help="an RGB-D sequence folder, tracks.csv, a Sturm .log file, or a folder of .log files")
