@@ -199,9 +199,11 @@ class Diagnosis:
         dropped = {c: ", ".join(e.replace("_", " ") for e in v) for c, v in self.dropped.items() if v}
         check = self.acceptance_check or {}
         if not self.effects and dropped.get("interval_check"):
-            lines.append(f"the search selected {dropped['interval_check']}, but the full-rate re-fit's 95% interval "
-                         "holds the effect's off value (no force, unit inertia ratio, nominal axis): the data do not "
-                         "support it, so no effect is reported")
+            checks = [t for t in self.tested if "interval_check" in t]
+            why = "; ".join((f"{t['interval_check'].replace('_', ' ')}: " if len(checks) > 1 else "") + t["reason"]
+                            for t in checks)
+            lines.append(f"the search selected {dropped['interval_check']}, but the full-rate re-fit does not support "
+                         f"it ({why}): no effect is reported")
         elif not self.effects and dropped.get("acceptance_check"):
             lines.append(f"no effect of the library both explains the recording (ΔBIC threshold {DELTA_BIC:g}) and "
                          f"predicts the {_span_words(check.get('span'))} better (dropped: "
@@ -214,6 +216,10 @@ class Diagnosis:
             lines.append("no effect is supported by the data (ΔBIC threshold "
                          f"{DELTA_BIC:g}): the nominal model explains the recording to its noise level")
         for e in self.effects:
+            if "nominal" in e.params:  # a value the model had, corrected
+                lines.append(f"wrong value on {e.joint}: {e.type.replace('_', ' ')} {e.params['nominal']:.4g} -> "
+                             f"{e.value:.4g} {e.unit} (95% [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]), ΔBIC {e.delta_bic:.0f}")
+                continue
             lines.append(f"missing physics on {e.joint}: {e.type.replace('_', ' ')} = {e.value:.4g} {e.unit} "
                          f"(95% [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]), ΔBIC {e.delta_bic:.0f}")
         for c, words in (("simulation_check", "simulating the fit span no better"),
@@ -496,14 +502,20 @@ def _calibration(model: ArticulatedModel, rec: Recording, trial: Trial, effects:
     return _result(fit, res, trial.X, z, trial.solve_time_s)
 
 
-def _interval_holds_off(model: ArticulatedModel, joint: str, effect: str, final: Calibration) -> float | None:
+def _interval_holds_off(model: ArticulatedModel, joint: str, effect: str, final: Calibration,
+                        motion: tuple[float, float] | None = None) -> float | None:
     """For an effect the model lacked (its parameter's nominal is its "off" value: zero force,
     unit inertia ratio, the nominal axis), how far inside its 95 % interval the off value sits
-    (0 at an end, 1 in the middle), or None when the interval excludes it (a supported effect),
-    or the effect has no off value (a stop) or the model already had it."""
-    if effect == "limit_contact":
-        return None
+    (0 at an end, 1 in the middle), or None when the interval excludes it (a supported effect) or
+    the model already had it.  A stop has no off value of its position; it is unsupported (1.0)
+    when its position's interval holds the whole recorded ``motion`` (lowest, highest position):
+    the data cannot place it, and what it fits is a one-sided spring over the motion."""
     e = final.estimates[_free_for(model, joint, effect)[0]]
+    if effect == "limit_contact":
+        if motion is None or model.joint(joint).dynamics.limit_stiffness > 0:
+            return None
+        lo, hi = float(np.ravel(e.ci95_low)[0]), float(np.ravel(e.ci95_high)[0])
+        return 1.0 if lo <= motion[0] and hi >= motion[1] else None
     if effect == "axis_tilt":
         angle = _reported_value(model, joint, effect, {e.name: e.value})
         half = e.ci95_angle_rad
@@ -515,6 +527,20 @@ def _interval_holds_off(model: ArticulatedModel, joint: str, effect: str, final:
     if not (np.isfinite(lo) and np.isfinite(hi)) or not lo <= off <= hi or hi <= lo:
         return None
     return 1.0 - abs(2.0 * off - lo - hi) / (hi - lo)
+
+
+def _interval_words(model: ArticulatedModel, joint: str, effect: str, final: Calibration,
+                    motion: tuple[float, float]) -> str:
+    """Why :func:`_interval_holds_off` finds ``effect`` unsupported, in words with the numbers."""
+    e = final.estimates[_free_for(model, joint, effect)[0]]
+    if effect == "axis_tilt":
+        return f"the tilt's 95% interval (±{e.ci95_angle_rad:.3g} rad) holds the nominal axis"
+    lo, hi = float(np.ravel(e.ci95_low)[0]), float(np.ravel(e.ci95_high)[0])
+    if effect == "limit_contact":
+        return (f"the stop's 95% interval [{lo:.4g}, {hi:.4g}] {e.unit} holds every recorded position, "
+                f"{motion[0]:.4g} to {motion[1]:.4g} {e.unit}: the data cannot place it")
+    off = "1" if effect == "inertia_error" else "0"
+    return f"its 95% interval [{lo:.4g}, {hi:.4g}] {e.unit} holds its off value {off}"
 
 
 def _n_params(names: list[str]) -> int:
@@ -960,17 +986,23 @@ def diagnose(
         nominal = _calibration(model, fit_rec, nominal_full, [], stops, segment_s, sigma_q, eps)
         final = _calibration(model, fit_rec, final_full, chosen, stops, segment_s, sigma_q, eps, fit=full.fit)
     # An effect the model lacked whose 95 % interval still holds its "off" value (zero force, unit
-    # inertia ratio, nominal axis) is not supported by the data, whatever the BIC of the search
-    # said (a fit can gain from reaching another optimum of the other effects): drop it, the
-    # weakest first, and re-fit.
+    # inertia ratio, nominal axis; for a stop, every recorded position) is not supported by the
+    # data, whatever the BIC of the search said (a fit can gain from reaching another optimum of
+    # the other effects): drop it, the weakest first, and re-fit.
+    def motion_of(joint: str) -> tuple[float, float]:
+        q = fit_rec.q[:, model.joint_index(joint)]
+        return float(q.min()), float(q.max())
+
     while True:
-        weak = [(i, w) for i, (j, e, _) in enumerate(selected) if (w := _interval_holds_off(model, j, e, final)) is not None]
+        weak = [(i, w) for i, (j, e, _) in enumerate(selected)
+                if (w := _interval_holds_off(model, j, e, final, motion_of(j))) is not None]
         if not weak:
             break
         i = max(weak, key=lambda iw: iw[1])[0]
         joint, effect, _ = selected.pop(i)
-        say(f"dropped {effect} on {joint}: its 95% interval holds its off value")
-        tested.append({"interval_check": f"{effect} on {joint}", "dropped": True})
+        reason = _interval_words(model, joint, effect, final, motion_of(joint))
+        say(f"dropped {effect} on {joint}: {reason}")
+        tested.append({"interval_check": f"{effect} on {joint}", "dropped": True, "reason": reason})
         dropped.setdefault("interval_check", []).append(f"{effect} on {joint}")
         equivalents.pop((joint, effect), None)
         chosen = [s[:2] for s in selected]
@@ -1005,6 +1037,10 @@ def diagnose(
             half = e.ci95_angle_rad or 0.0
             found.append(FoundEffect(joint, effect, value, "rad", (max(value - half, 0.0), value + half), d, params))
             continue
+        had = model.joint(joint).dynamics.limit_stiffness > 0 if effect == "limit_contact" else \
+            abs(float(e.nominal[0]) - (1.0 if effect == "inertia_error" else 0.0)) > 1e-12
+        if had:  # the model had the effect: this is a correction of its value
+            params["nominal"] = float(e.nominal[0])
         found.append(FoundEffect(joint, effect, float(e.value[0]), e.unit, (float(e.ci95_low[0]), float(e.ci95_high[0])), d, params))
 
     held_out = None

@@ -26,16 +26,18 @@ def test_prediction_signal_is_the_worst_joint_error_in_noise_sigmas():
     assert prediction_signal(HeldOut(np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2))), sigma) == 0.0
 
 
-def _diagnosis(effects=(), dropped=None, acceptance=None, held_out_used=False, others=()):
-    return Diagnosis((), tuple(effects), (), None, None, None, None, tuple(others),
+def _diagnosis(effects=(), dropped=None, acceptance=None, held_out_used=False, others=(), tested=()):
+    return Diagnosis((), tuple(effects), tuple(tested), None, None, None, None, tuple(others),
                      held_out_used_for_selection=held_out_used, acceptance_check=acceptance, dropped=dropped or {})
 
 
 def test_summary_blames_the_interval_check_when_it_dropped_every_effect():
+    reason = "its 95% interval [-0.01, 0.03] N*m*s/rad holds its off value 0"
     d = _diagnosis(dropped={"interval_check": ["viscous_damping on j0"]}, held_out_used=True,
-                   acceptance={"span": "held_out", "reason": "held-out span judged", "signal_sigma": {}})
+                   acceptance={"span": "held_out", "reason": "held-out span judged", "signal_sigma": {}},
+                   tested=[{"interval_check": "viscous_damping on j0", "dropped": True, "reason": reason}])
     text = d.summary()
-    assert "viscous damping on j0" in text and "95% interval holds the effect's off value" in text
+    assert "viscous damping on j0" in text and f"the full-rate re-fit does not support it ({reason})" in text
     assert "predicts the held-out span better" not in text
 
 
