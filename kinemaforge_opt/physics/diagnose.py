@@ -157,6 +157,13 @@ class HeldOut:
     def rms_after(self) -> float:
         return float(np.sqrt(np.mean((self.q_after - self.q_rec) ** 2)))
 
+    def gain_sigma(self, sigma_q: np.ndarray) -> float:
+        """How much better the after-model predicts, in noise sigmas: the drop of the RMS error
+        normalised per joint by ``sigma_q`` (n,) and pooled over joints."""
+        s = np.maximum(np.asarray(sigma_q, float), 1e-12)
+        rms = [float(np.sqrt(np.mean(((q - self.q_rec) / s) ** 2))) for q in (self.q_before, self.q_after)]
+        return rms[0] - rms[1]
+
 
 @dataclass(frozen=True)
 class Diagnosis:
@@ -211,7 +218,7 @@ class Diagnosis:
                          "cannot express")
         elif not self.effects and dropped.get("simulation_check"):
             lines.append(f"the search selected {dropped['simulation_check']}, but the selection did not simulate the "
-                         "fit span better than the nominal model: no effect is reported")
+                         "fit span better than the nominal model by more than the noise: no effect is reported")
         elif not self.effects:
             lines.append("no effect is supported by the data (ΔBIC threshold "
                          f"{DELTA_BIC:g}): the nominal model explains the recording to its noise level")
@@ -882,7 +889,8 @@ def diagnose(
     def drop_until_better(span: Recording, span_s: float | None, droppable: list[int], check: str, rms_key: str,
                           doing: str, stage: str, first: HeldOut | None = None) -> None:
         """Drop selected effects until the selection simulates ``span`` better than the nominal
-        model (or none of ``droppable``, indices into ``selected``, is left): backward elimination,
+        model by MIN_EFFECT_SIZE_SIGMA noise sigmas or more (or none of ``droppable``, indices
+        into ``selected``, is left): backward elimination,
         each step dropping the effect whose removal (the rest re-fitted) simulates ``span`` best.
         ``doing``: progress text, formatted with the number of effects ``n``; ``stage``: the key
         of ``dropped`` the dropped effects are listed under; ``first``: the current selection's
@@ -892,8 +900,10 @@ def diagnose(
         say(doing.format(n=len(selected)))
         h = first or predict_before_after(nominal_model, _model_of(model, current, stops), span, span_s)
         while True:
-            tested.append({check: [f"{e} on {j}" for j, e, _ in selected], rms_key: [h.rms_before, h.rms_after]})
-            if h.rms_after < h.rms_before or not keys:
+            tested.append({check: [f"{e} on {j}" for j, e, _ in selected], rms_key: [h.rms_before, h.rms_after],
+                           "gain_sigma": h.gain_sigma(sigma_q)})
+            # better by more than the noise: a smaller gain is no evidence the selection explains the motion
+            if h.gain_sigma(sigma_q) >= MIN_EFFECT_SIZE_SIGMA or not keys:
                 return
             options = []  # (prediction, dropped effect, trial) per removal
             for key in keys:
