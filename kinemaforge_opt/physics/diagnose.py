@@ -890,8 +890,8 @@ def diagnose(
                           doing: str, stage: str, first: HeldOut | None = None) -> None:
         """Drop selected effects until the selection simulates ``span`` better than the nominal
         model by MIN_EFFECT_SIZE_SIGMA noise sigmas or more (or none of ``droppable``, indices
-        into ``selected``, is left): backward elimination,
-        each step dropping the effect whose removal (the rest re-fitted) simulates ``span`` best.
+        into ``selected``, is left): backward elimination, each step dropping the effect whose
+        removal (the rest re-fitted) simulates ``span`` best.
         ``doing``: progress text, formatted with the number of effects ``n``; ``stage``: the key
         of ``dropped`` the dropped effects are listed under; ``first``: the current selection's
         prediction of ``span`` if already made."""
@@ -927,10 +927,11 @@ def diagnose(
 
     # The collocation fit lets states bend where the dynamics are soft, so a set of effects can
     # fit it without explaining the motion.  The selection must also simulate the fit span
-    # better than the nominal model (in SIMULATION_CHECK_S pieces, each from its own best state:
-    # open-loop replays of many seconds diverge for any model); if it does not, effects are
-    # dropped, each time the one whose removal simulates the span best, until it does (or none
-    # is left).  A limit contact is judged like every other effect: the model holds its stop.
+    # better than the nominal model, by a noise sigma or more (in SIMULATION_CHECK_S pieces, each
+    # from its own best state: open-loop replays of many seconds diverge for any model); if it
+    # does not, effects are dropped, each time the one whose removal simulates the span best,
+    # until it does (or none is left).  A limit contact is judged like every other effect: the
+    # model holds its stop.
     drop_until_better(srch, segment_s or SIMULATION_CHECK_S, list(range(len(selected))),
                       "simulation_check", "fit_span_simulated_rms", "simulating the fit span with {n} effect(s)",
                       "simulation_check")
