@@ -909,14 +909,12 @@ def diagnose(
             for key in keys:
                 rest = [x[:2] for x in selected if x[:2] != key]
                 trial = trial_of(rest, nominal_trial) if rest else nominal_trial
-                if rest and not trial.success:
-                    continue
                 say(f"simulating the fit span without {key[1]} on {key[0]}")
                 after = _model_of(model, trial, stops) if rest else nominal_model
                 options.append((predict_before_after(nominal_model, after, span, span_s), key, trial))
-            if not options:
-                return
-            h, (joint, effect), current = min(options, key=lambda o: o[0].rms_after)
+            # a removal whose re-fit converged is preferred; one is made in any case
+            converged = [o for o in options if o[2].success] or options
+            h, (joint, effect), current = min(converged, key=lambda o: o[0].rms_after)
             selected[:] = [x for x in selected if x[:2] != (joint, effect)]
             keys.remove((joint, effect))
             dropped.setdefault(stage, []).append(f"{effect} on {joint}")
