@@ -93,8 +93,8 @@ def _baseline_model(model, res: BaselineResult):
     return augmented(model, ratios), laws
 
 
-def _baseline_after(model, held, res: BaselineResult) -> float:
-    fitted, laws = _baseline_model(model, res)
+def _baseline_after(fitted, laws: dict, held) -> float:
+    """RMS error [rad or m] of a baseline's model (:func:`_baseline_model`) predicting ``held``."""
     q = predict(fitted, held, laws, state_window_s=STATE_WINDOW_S)
     return float(np.sqrt(np.nanmean((q - held.q) ** 2)))
 
@@ -134,8 +134,8 @@ def run_case(case: str, noise_seed: int = 0) -> list[CaseScore]:
         warnings.simplefilter("ignore")  # STLSQ warns each time a threshold removes every term
         for fn in (idls, sindy):
             res = fn(er.model, er.recording, HOLDOUT)
-            after = _baseline_after(er.model, held, res) if held is not None else None
             fitted, laws = _baseline_model(er.model, res)
+            after = _baseline_after(fitted, laws, held) if held is not None else None
             out.append(replace(_score(case, res.method, truth, {e.type: e.value for e in res.effects},
                                       (rms_before, after), res.time_s),
                                other_rms_before=other_before, other_rms_after=segment_rms(fitted, other, laws)))

@@ -168,13 +168,19 @@ class JointDynamics:
             raise ModelError(
                 f"joint dynamics limit_side must be +1 (upper stop) or -1 (lower stop), got {self.limit_side}")
 
-    def passive_force(self, q, v):
-        """Generalised passive force at (q, v); numpy arrays or casadi symbols (smooth sign)."""
+    def passive_force(self, q, v, without: frozenset = frozenset(), eps: float | None = None):
+        """Generalised passive force at (q, v); numpy arrays, casadi or Drake symbols (smooth
+        sign).  without: effect types (:mod:`kinemaforge_opt.physics.effects` names) left out;
+        eps: smooth-sign width [rad/s or m/s] (default: the effect library's)."""
         from ..physics.effects import EFFECTS, dynamics_effects, effect_arguments
 
         total = 0 * v
         for t in dynamics_effects(self):
+            if t in without:
+                continue
             args, kwargs = effect_arguments(self, t)
+            if eps is not None:
+                kwargs["eps"] = eps
             total = total + EFFECTS[t].force(q, v, *args, **kwargs)
         return total
 

@@ -518,19 +518,16 @@ def _interval_holds_off(model: ArticulatedModel, joint: str, effect: str, final:
     when its position's interval holds the whole recorded ``motion`` (lowest, highest position):
     the data cannot place it, and what it fits is a one-sided spring over the motion."""
     e = final.estimates[_free_for(model, joint, effect)[0]]
-    if effect == "limit_contact":
-        if motion is None or model.joint(joint).dynamics.limit_stiffness > 0:
-            return None
-        lo, hi = float(np.ravel(e.ci95_low)[0]), float(np.ravel(e.ci95_high)[0])
-        return 1.0 if lo <= motion[0] and hi >= motion[1] else None
     if effect == "axis_tilt":
         angle = _reported_value(model, joint, effect, {e.name: e.value})
         half = e.ci95_angle_rad
         return None if half is None or not np.isfinite(half) or angle > half else 1.0 - angle / max(half, 1e-300)
-    off = 1.0 if effect == "inertia_error" else 0.0
-    if abs(float(np.ravel(e.nominal)[0]) - off) > 1e-12:
+    if _model_had(model, joint, effect, e):
         return None
     lo, hi = float(np.ravel(e.ci95_low)[0]), float(np.ravel(e.ci95_high)[0])
+    if effect == "limit_contact":
+        return 1.0 if motion is not None and lo <= motion[0] and hi >= motion[1] else None
+    off = _off_value(effect)
     if not (np.isfinite(lo) and np.isfinite(hi)) or not lo <= off <= hi or hi <= lo:
         return None
     return 1.0 - abs(2.0 * off - lo - hi) / (hi - lo)
@@ -546,8 +543,20 @@ def _interval_words(model: ArticulatedModel, joint: str, effect: str, final: Cal
     if effect == "limit_contact":
         return (f"the stop's 95% interval [{lo:.4g}, {hi:.4g}] {e.unit} holds every recorded position, "
                 f"{motion[0]:.4g} to {motion[1]:.4g} {e.unit}: the data cannot place it")
-    off = "1" if effect == "inertia_error" else "0"
-    return f"its 95% interval [{lo:.4g}, {hi:.4g}] {e.unit} holds its off value {off}"
+    return f"its 95% interval [{lo:.4g}, {hi:.4g}] {e.unit} holds its off value {_off_value(effect):g}"
+
+
+def _off_value(effect: str) -> float:
+    """The value of an effect's first parameter that switches it off (unit inertia ratio, else 0)."""
+    return 1.0 if effect == "inertia_error" else 0.0
+
+
+def _model_had(model: ArticulatedModel, joint: str, effect: str, estimate) -> bool:
+    """Whether ``model`` already had ``effect`` on ``joint`` (so a fit changed its value): a stop
+    its dynamics hold, or a first parameter whose nominal ``estimate`` is not the off value."""
+    if effect == "limit_contact":
+        return model.joint(joint).dynamics.limit_stiffness > 0
+    return abs(float(np.ravel(estimate.nominal)[0]) - _off_value(effect)) > 1e-12
 
 
 def _n_params(names: list[str]) -> int:
@@ -900,10 +909,11 @@ def diagnose(
         say(doing.format(n=len(selected)))
         h = first or predict_before_after(nominal_model, _model_of(model, current, stops), span, span_s)
         while True:
+            gain = h.gain_sigma(sigma_q)
             tested.append({check: [f"{e} on {j}" for j, e, _ in selected], rms_key: [h.rms_before, h.rms_after],
-                           "gain_sigma": h.gain_sigma(sigma_q)})
+                           "gain_sigma": gain})
             # better by more than the noise: a smaller gain is no evidence the selection explains the motion
-            if h.gain_sigma(sigma_q) >= MIN_EFFECT_SIZE_SIGMA or not keys:
+            if gain >= MIN_EFFECT_SIZE_SIGMA or not keys:
                 return
             options = []  # (prediction, dropped effect, trial) per removal
             for key in keys:
@@ -1046,9 +1056,7 @@ def diagnose(
             half = e.ci95_angle_rad or 0.0
             found.append(FoundEffect(joint, effect, value, "rad", (max(value - half, 0.0), value + half), d, params))
             continue
-        had = model.joint(joint).dynamics.limit_stiffness > 0 if effect == "limit_contact" else \
-            abs(float(e.nominal[0]) - (1.0 if effect == "inertia_error" else 0.0)) > 1e-12
-        if had:  # the model had the effect: this is a correction of its value
+        if _model_had(model, joint, effect, e):  # a correction of the value the model had
             params["nominal"] = float(e.nominal[0])
         found.append(FoundEffect(joint, effect, float(e.value[0]), e.unit, (float(e.ci95_low[0]), float(e.ci95_high[0])), d, params))
 

@@ -171,13 +171,10 @@ def energy_residual(model: ArticulatedModel, recording: Recording, stop_toleranc
 def _other_passive_power(dynamics, q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """(T,) Σ_j F_j(q_j, v_j) v_j [W] of the joint forces other than damping, Coulomb friction and
     springs (which the energy balance books on its own) that each joint's ``dynamics`` hold."""
-    from ..physics.effects import EFFECTS, dynamics_effects, effect_arguments
-
+    booked = frozenset({"viscous_damping", "coulomb_friction", "spring"})
     power = np.zeros(len(q))
     for k, d in enumerate(dynamics):
-        for t in set(dynamics_effects(d)) - {"viscous_damping", "coulomb_friction", "spring"}:
-            args, kwargs = effect_arguments(d, t)
-            power += EFFECTS[t].force(q[:, k], v[:, k], *args, **kwargs) * v[:, k]
+        power += d.passive_force(q[:, k], v[:, k], without=booked) * v[:, k]
     return power
 
 

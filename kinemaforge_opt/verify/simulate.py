@@ -34,7 +34,7 @@ from pydrake.trajectories import PiecewisePolynomial
 from ..errors import DataError, require_finite
 from ..io.recording import Recording
 from ..model import ArticulatedModel
-from ..physics.effects import EFFECTS, dynamics_effects, effect_arguments
+from ..physics.effects import dynamics_effects
 from .energy import mechanical_energy, model_ordered
 from .plant import DISCRETE_TIME_STEP_S, build_plant
 
@@ -196,11 +196,7 @@ def _joint_force_system(builder: DiagramBuilder, plant, dynamics, eps: np.ndarra
 
 def _joint_force(dynamics, q: Variable, v: Variable, eps: float) -> Expression:
     """The sum of the force laws of ``dynamics`` not :data:`IN_PLANT`, as a Drake expression."""
-    total = Expression(0.0)
-    for t in sorted(set(dynamics_effects(dynamics)) - IN_PLANT):
-        args, kwargs = effect_arguments(dynamics, t)
-        total = total + np.asarray(EFFECTS[t].force(Expression(q), Expression(v), *args, eps=eps, **kwargs)).item()
-    return total
+    return Expression(0.0) + np.asarray(dynamics.passive_force(Expression(q), Expression(v), IN_PLANT, eps)).item()
 
 
 def _force_trajectory(tau: Recording, t_end: float) -> PiecewisePolynomial:
