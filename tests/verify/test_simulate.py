@@ -156,3 +156,15 @@ def test_plant_matches_pinocchio_on_a_tree_with_every_joint_kind():
 def test_bad_initial_state_is_named():
     with pytest.raises(DataError, match="q0 must have shape"):
         simulate(pendulum(), [0.0, 1.0], [0.0], 1.0)
+
+
+@pytest.mark.parametrize("discrete", [False, True])
+def test_a_recorded_ramp_force_delivers_its_impulse(discrete):
+    # m v' = a − b t, recorded at 100 Hz: v = v0 + (a t − b t²/2) / m.  The discrete plant holds
+    # its force input over each 1 ms step; held at its step-start value the ramp gave
+    # b·dt·t/(2m) too much speed (2.5e-3 m/s after 1 s), held at its step mean it is exact.
+    m, a, b, v0 = 1.0, 5.0, 5.0, 0.0
+    t = np.arange(0.0, 1.0 + 1e-9, 0.01)
+    push = Recording(t, ("x",), np.zeros((t.size, 1)), tau=(a - b * t)[:, None])
+    tr = simulate(slider(m), [0.0], [v0], 1.0, tau=push, dt_out=0.01, discrete=discrete)
+    np.testing.assert_allclose(tr.v[:, 0], v0 + (a * tr.t - b * tr.t**2 / 2) / m, atol=1e-5)
