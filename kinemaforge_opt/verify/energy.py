@@ -85,14 +85,20 @@ def joint_kinetic_energy(model: ArticulatedModel, q: np.ndarray, v: np.ndarray) 
 
 
 def free_segments(model: ArticulatedModel, q: np.ndarray, v: np.ndarray | None = None,
-                  tolerance: float = STOP_TOLERANCE) -> list[tuple[int, int]]:
+                  tolerance: float = STOP_TOLERANCE, t: np.ndarray | None = None,
+                  sample_t: np.ndarray | None = None) -> list[tuple[int, int]]:
     """Maximal runs [a, b] (sample indices, b > a) of the samples ``q``, ``v`` (T, n) in which no
     interval may hold a stop's impact: an interval is out when, at either of its ends, a joint is
     on a stop (:func:`at_stop`) while moving along it with more than ``tolerance`` × the motion's
     kinetic-energy span (max − min over the samples; :func:`joint_kinetic_energy`), or strictly
     past a limit (a compliant stop pressed in stores energy).  A joint that rests on its stop (a
     closed door while the other one swings) takes no work from it.  Without
-    ``v``, finite differences of q."""
+    ``v``, finite differences of q.
+
+    t (T,) [s] and sample_t (S,) [s]: when q, v interpolate coarser measured samples at the times
+    ``sample_t``, every measured interval that holds an interval out, and its two neighbours,
+    are out too: the impact happened somewhere between two samples, and the interpolant's error
+    spreads to the next knots (a cubic spline's by a factor ≈ 0.27 per knot)."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     stop = at_stop(model, q, tolerance)
     past = at_stop(model, q, -1e-6)  # beyond a limit (by more than numerical jitter)
@@ -103,6 +109,14 @@ def free_segments(model: ArticulatedModel, q: np.ndarray, v: np.ndarray | None =
         stop &= ek > tolerance * span
     hit = (stop | past).any(axis=1)
     free = ~(hit[1:] | hit[:-1])  # interval i: samples i -> i + 1
+    if sample_t is not None and t is not None and not free.all():
+        # q, v interpolate coarser measured samples: an impact flagged in one measured interval
+        # happened somewhere in it, and the interpolant's error spreads to its neighbours
+        k = np.clip(np.searchsorted(sample_t, t[:-1], side="right") - 1, 0, len(sample_t) - 2)
+        bad = np.zeros(len(sample_t) + 1, dtype=bool)
+        for j in np.unique(k[~free]):
+            bad[max(j - 1, 0): j + 2] = True
+        free &= ~bad[k]
     out, i = [], 0
     while i < free.size:
         if free[i]:
@@ -116,7 +130,8 @@ def free_segments(model: ArticulatedModel, q: np.ndarray, v: np.ndarray | None =
     return out
 
 
-def energy_residual(model: ArticulatedModel, recording: Recording, stop_tolerance: float = STOP_TOLERANCE) -> float:
+def energy_residual(model: ArticulatedModel, recording: Recording, stop_tolerance: float = STOP_TOLERANCE,
+                    sample_t: np.ndarray | None = None) -> float:
     """Dimensionless energy-balance residual of ``recording`` under ``model``.
 
     With E the mechanical energy above, P_app = τ·v the applied power and
@@ -136,7 +151,8 @@ def energy_residual(model: ArticulatedModel, recording: Recording, stop_toleranc
     over the stop-free segments it is below 1e-4 and 0.005.  The last term of S normalises a
     conservative motion (ΔE = W = 0) by the kinetic energy it exchanges.  r = 0 for a perfectly
     consistent model and data; r is 0 if nothing moves (S = 0); NaN when no interval is free of
-    the stops (nothing to check).  Velocities come from the recording, or from finite
+    the stops (nothing to check).  ``sample_t``: the measured sample times the recording
+    interpolates, if it does (:func:`free_segments`).  Velocities come from the recording, or from finite
     differences of q when it has none; τ is taken as zero when the recording has no ``tau``
     columns.  Joints of the model missing from the recording raise :class:`DataError`.
     """
@@ -150,7 +166,7 @@ def energy_residual(model: ArticulatedModel, recording: Recording, stop_toleranc
     f = np.array([d.coulomb for d in dyn])
     p_app = np.sum(tau * v, axis=1)
     p_dis = -(v**2 @ b + np.abs(v) @ f) + _other_passive_power(dyn, rec.q, v)
-    segments = free_segments(model, rec.q, v, stop_tolerance)
+    segments = free_segments(model, rec.q, v, stop_tolerance, rec.t, sample_t)
     if not segments:
         return float("nan")
     num = dE_abs = W_app_abs = W_dis_abs = ek_span = 0.0

@@ -17,8 +17,11 @@ motion the reconstruction measured:
    model comes to rest where the real object did, the only observation there is;
 4. the energy residual of the measured motion under the model (:func:`.energy.energy_residual`),
    evaluated at the force's rate on a cubic spline of the measured q (:func:`fine_motion`), over
-   the spans where no joint is on one of the model's stops (``energy_books_share``: their share
-   of the recording; a stop's impact work is not in the books).
+   the spans where no joint is on one of the model's stops, less the measured intervals around
+   each stop contact (the impact happened somewhere between two samples and the spline's error
+   spreads to the next knots; ``energy_books_share``: the share of the recording left; a stop's
+   impact work is not in the books).  On the synthetic protocol this took the true model's
+   residual from 0.209 to 0.029 (a laptop lid slammed shut: 0.96 to 0.09).
 
 Outputs in OUT: ``recording.csv`` (the joint-space recording, so ``diagnose`` and ``view`` can use
 it), ``replay.csv`` (the Drake replay, same time base, up to the longest horizon), ``tracks.csv``
@@ -146,8 +149,8 @@ def replay_check(model: ArticulatedModel, jr: JointRecording, horizons_s=DEFAULT
     v0 = fit_initial_velocity(model, rec, jr.forcing, discrete=discrete)
     report = drift(model, rec, horizons_s, discrete=discrete, forcing=jr.forcing, v0=v0)
     fine = fine_motion(jr)
-    residual = energy_residual(model, fine)
-    books = sum(fine.t[b] - fine.t[a] for a, b in free_segments(model, fine.q, fine.v))
+    residual = energy_residual(model, fine, sample_t=rec.t)
+    books = sum(fine.t[b] - fine.t[a] for a, b in free_segments(model, fine.q, fine.v, t=fine.t, sample_t=rec.t))
     return {
         "drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
         # None: the motion never leaves the model's stops, so no span has energy books to check
