@@ -3,23 +3,32 @@ built once per time step, candidates verified by free-space tests).
 
 A proposal is a cluster of moving points at its reference time r.  Its motion ΔT(s) (world
 frame, ΔT(r) = I, so the track stays anchored to the reference) is solved outward from r, one
-time step at a time, from the constant-velocity extrapolation of the neighbouring solved poses
-(a door swinging fast between two samples) or, when that fails verification, the neighbouring
-pose itself.  Each candidate is refined by ICP — with only the points the images confirm at the
-guess, when there are enough (a part's far side would pull it onto what lies behind) — (coarse radius ICP_COARSE_VOXELS, then fine radius ICP_FINE_VOXELS; point-to-point,
-as point-to-plane would let a flat part slide in its own plane) against the non-static fused
-points at s (static surfaces flush with a part, like a cabinet's front frame around a closed
-door, would let it slide) — a part at rest where it is static (a closed drawer's front) finds
-few correspondences and keeps its guess, which the images then confirm — and then *verified*
-by the free-space tests of :mod:`change` against every depth image at s: the score is
-the share of the proposal's points consistent with the images minus the share the images saw
-through.  A candidate is acceptable when the points the images can judge are mostly consistent
-(:func:`acceptable`).  Only when both candidates fail are principal-axes alignments onto the moving clusters at s tried
-(re-detection).  The images accept every alignment of a symmetric part (a flat door turned
-half a turn about its normal covers the same surface), so of the acceptable re-detections the one
-nearest the constant-velocity prediction is kept (:func:`displacement`).  With no acceptable
-candidate the proposal is unobserved at s (NaN: occluded or out of view), and the next step starts
-from the last solved pose.
+time step at a time, from two guesses: the constant-velocity extrapolation of the neighbouring
+solved poses (a door swinging fast between two samples) and the neighbouring pose itself (a part
+that stops).  From each, ICP runs — with only the points the images confirm at the guess, when
+there are enough (a part's far side would pull it onto what lies behind) — a coarse pass (radius
+ICP_COARSE_VOXELS, and a *wide* one starting at WIDE_FACTOR times that: a part that starts,
+stops or changes speed between two samples lands outside the coarse basin of either guess) and a
+fine pass (radius ICP_FINE_VOXELS) from each coarse pose not within the fine radius of another
+(the two share a basin); point-to-point, as point-to-plane would let a flat part slide in its
+own plane; against the non-static fused points at s (static surfaces flush with a part, like a
+cabinet's front frame around a closed door, would let it slide) — a part at rest where it is
+static (a closed drawer's front) finds few correspondences and keeps its guess, which the images
+then confirm.  Each result is
+*verified* by the free-space tests of :mod:`change` against every depth image at s; it is
+acceptable when the points the images can judge are mostly consistent (:func:`acceptable`).  Of
+the acceptable results the one with the largest share of points confirmed *and* on an observed
+surface (within the fine radius of a fused point) less the share seen through is kept.  The
+free-space test alone cannot rank them: it confirms a point anywhere within τ = 3√2·σ_z(z) of a
+reading (several cm at 2 m), ICP matches within 1.5 voxels — a drawer front pulled out 8 cm
+between two samples, which the coarse pass from rest leaves short and tilted 44° about its long
+axis, is still 97 % confirmed with half its points off any surface (the wide pass puts 99 % of
+them on it).  Only when no result is acceptable are principal-axes alignments onto the moving
+clusters at s tried (re-detection).  The images accept every alignment of a symmetric part (a
+flat door turned half a turn about its normal covers the same surface), so of the acceptable
+re-detections the one nearest the constant-velocity prediction is kept (:func:`displacement`).
+With no acceptable candidate the proposal is unobserved at s (NaN: occluded or out of view), and
+the next step starts from the last solved pose.
 
 Slips: a fragment sliding along itself (a drawer's side wall) lags its part until no guess
 verifies; re-detection may then put it on another face of the part (90° and tens of cm in one
@@ -335,37 +344,72 @@ class Tracker:
             viol += v < 0
         return float(np.mean(cons > 0)), float(np.mean((viol > 0) & (cons == 0)))
 
-    def _icp(self, points: np.ndarray, s: int, T0: np.ndarray, wide: bool = False) -> np.ndarray:
-        """Coarse pass on every COARSE_SUBSAMPLE-th point, then the fine pass on all of them."""
-        tol = ICP_TOLERANCE_VOXELS * self.voxel
+    def _coarse(self, points: np.ndarray, s: int, T0: np.ndarray, wide: bool = False) -> np.ndarray:
+        """Coarse ICP pass of every COARSE_SUBSAMPLE-th point from ``T0`` (wide: starting at
+        WIDE_FACTOR times the coarse radius)."""
         radii = (ICP_COARSE_VOXELS * self.voxel,)
         if wide:
             radii = (WIDE_FACTOR * radii[0],) + radii
-        T = icp(points[::COARSE_SUBSAMPLE], self.trees[s], self.targets[s], T0, radii, tolerance=tol)
-        return icp(points, self.trees[s], self.targets[s], T, (ICP_FINE_VOXELS * self.voxel,), tolerance=tol)
+        tol = ICP_TOLERANCE_VOXELS * self.voxel
+        return icp(points[::COARSE_SUBSAMPLE], self.trees[s], self.targets[s], T0, radii, tolerance=tol)
+
+    def _fine(self, points: np.ndarray, s: int, T0: np.ndarray) -> np.ndarray:
+        """Fine ICP pass of all the points from ``T0``."""
+        tol = ICP_TOLERANCE_VOXELS * self.voxel
+        return icp(points, self.trees[s], self.targets[s], T0, (ICP_FINE_VOXELS * self.voxel,), tolerance=tol)
+
+    def _confirmed(self, points: np.ndarray, s: int, T0: np.ndarray) -> np.ndarray:
+        """The (N', 3) reference points the images at step s confirm at the guess ``T0``, or all
+        of them when fewer than MIN_VISIBLE_SHARE are: ICP's source (a door's inner face, turned
+        away near closed, would otherwise pull onto the body behind it)."""
+        seen = self.verdicts(points @ T0[:3, :3].T + T0[:3, 3], s)[0] > 0
+        return points[seen] if seen.sum() >= MIN_VISIBLE_SHARE * len(points) else points
+
+    def fit(self, points: np.ndarray, s: int) -> float:
+        """Share of (N, 3) world points [m] that the images at step s confirm and that lie on an
+        observed surface (within the fine ICP radius of a fused point), less the share only seen
+        through (module doc: the free-space test alone does not rank poses)."""
+        cons, viol = self.verdicts(points, s)
+        on = self.full_tree(s).query(points, distance_upper_bound=ICP_FINE_VOXELS * self.voxel)[0] < np.inf
+        return float(np.mean(cons.astype(bool) & on) - np.mean(viol))
 
     def solve_step(self, points: np.ndarray, s: int, guesses: list[np.ndarray]) -> np.ndarray | None:
-        """Best verified (4, 4) world motion of (N, 3) reference points to step s, or None."""
+        """Best verified (4, 4) world motion of (N, 3) reference points to step s, or None
+        (module doc): narrow and wide coarse ICP from each distinct guess, the fine pass from each
+        distinct coarse pose, and of the acceptable results the best :meth:`fit`; with none,
+        :meth:`redetect`."""
         if self.trees[s] is None or len(self.targets[s]) < 3:
             return None
-        for cands, wide in [([g], False) for g in guesses] + [(guesses, True), (None, False)]:
-            redetect = cands is None
-            if redetect:
-                cands = [T for cluster in self.moving_clusters(s) for T in pca_alignments(points, cluster)]
-            best, best_score = None, -np.inf
-            for T0 in cands:
-                # only the points the images confirm at the guess take part (a door's inner face,
-                # turned away near closed, would otherwise pull onto the body behind it)
-                seen = self.verdicts(points @ T0[:3, :3].T + T0[:3, 3], s)[0] > 0
-                T = self._icp(points[seen] if seen.sum() >= MIN_VISIBLE_SHARE * len(points) else points, s, T0, wide)
-                cons, viol = self.verify(points @ T[:3, :3].T + T[:3, 3], s)
-                # re-detections: the acceptable one nearest the prediction (module doc)
-                score = -displacement(T, guesses[0], points) if redetect else cons - viol
-                if score > best_score and acceptable(cons, viol):
-                    best, best_score = T, score
-            if best is not None:
-                return best
-        return None
+        fine = ICP_FINE_VOXELS * self.voxel
+        starts: list[tuple[np.ndarray, np.ndarray]] = []  # (coarse pose, ICP source)
+        for k, T0 in enumerate(guesses):
+            if any(displacement(T0, G, points) <= fine for G in guesses[:k]):
+                continue  # one start (a part at rest: constant velocity is no motion)
+            source = self._confirmed(points, s, T0)
+            for wide in (False, True):
+                T = self._coarse(source, s, T0, wide)
+                if all(displacement(T, U, points) > fine for U, _ in starts):
+                    starts.append((T, source))
+        poses = [self._fine(source, s, T0) for T0, source in starts]
+        found = [T for T in poses if acceptable(*self.verify(points @ T[:3, :3].T + T[:3, 3], s))]
+        if not found:
+            return self.redetect(points, s, guesses[0])
+        if len(found) == 1:
+            return found[0]
+        return max(found, key=lambda T: self.fit(points @ T[:3, :3].T + T[:3, 3], s))
+
+    def redetect(self, points: np.ndarray, s: int, prediction: np.ndarray) -> np.ndarray | None:
+        """Principal-axes alignments of (N, 3) reference points onto the moving clusters at step
+        s, refined by ICP: of the acceptable ones the (4, 4) world motion nearest the
+        ``prediction`` (module doc), or None."""
+        best, best_score = None, -np.inf
+        for T0 in (T for cluster in self.moving_clusters(s) for T in pca_alignments(points, cluster)):
+            source = self._confirmed(points, s, T0)
+            T = self._fine(source, s, self._coarse(source, s, T0))
+            score = -displacement(T, prediction, points)
+            if score > best_score and acceptable(*self.verify(points @ T[:3, :3].T + T[:3, 3], s)):
+                best, best_score = T, score
+        return best
 
     def track(self, name: str, ref: int, points: np.ndarray) -> Proposal:
         """Track (N, 3) world points of step ``ref`` through every step, then grow the
