@@ -335,14 +335,8 @@ class Tracker:
     def verify(self, points: np.ndarray, s: int) -> tuple[float, float]:
         """(consistent share, violated share) of (N, 3) world points against the images at step
         s: the share of points some image confirms, and of points only seen through."""
-        cons = np.zeros(len(points), dtype=int)
-        viol = np.zeros(len(points), dtype=int)
-        for view, window in zip(self.clouds[s].views, self.windows(s)):
-            cam = view.camera or self.cameras[view.frame.camera]
-            v = free_space_test(points, cam, view.frame.T_world_camera, window, self.noise)
-            cons += v > 0
-            viol += v < 0
-        return float(np.mean(cons > 0)), float(np.mean((viol > 0) & (cons == 0)))
+        cons, viol = self.verdicts(points, s)
+        return float(np.mean(cons)), float(np.mean(viol))
 
     def _coarse(self, points: np.ndarray, s: int, T0: np.ndarray, wide: bool = False) -> np.ndarray:
         """Coarse ICP pass of every COARSE_SUBSAMPLE-th point from ``T0`` (wide: starting at
@@ -365,11 +359,12 @@ class Tracker:
         seen = self.verdicts(points @ T0[:3, :3].T + T0[:3, 3], s)[0] > 0
         return points[seen] if seen.sum() >= MIN_VISIBLE_SHARE * len(points) else points
 
-    def fit(self, points: np.ndarray, s: int) -> float:
+    def fit(self, points: np.ndarray, s: int, verdicts: tuple[np.ndarray, np.ndarray] | None = None) -> float:
         """Share of (N, 3) world points [m] that the images at step s confirm and that lie on an
         observed surface (within the fine ICP radius of a fused point), less the share only seen
-        through (module doc: the free-space test alone does not rank poses)."""
-        cons, viol = self.verdicts(points, s)
+        through (module doc: the free-space test alone does not rank poses).  ``verdicts``: the
+        points' :meth:`verdicts` at s, if already made."""
+        cons, viol = self.verdicts(points, s) if verdicts is None else verdicts
         on = self.full_tree(s).query(points, distance_upper_bound=ICP_FINE_VOXELS * self.voxel)[0] < np.inf
         return float(np.mean(cons.astype(bool) & on) - np.mean(viol))
 
@@ -390,13 +385,18 @@ class Tracker:
                 T = self._coarse(source, s, T0, wide)
                 if all(displacement(T, U, points) > fine for U, _ in starts):
                     starts.append((T, source))
-        poses = [self._fine(source, s, T0) for T0, source in starts]
-        found = [T for T in poses if acceptable(*self.verify(points @ T[:3, :3].T + T[:3, 3], s))]
+        found = []  # (pose, moved points, their verdicts) of the acceptable results
+        for T0, source in starts:
+            T = self._fine(source, s, T0)
+            moved = points @ T[:3, :3].T + T[:3, 3]
+            cons, viol = self.verdicts(moved, s)
+            if acceptable(float(np.mean(cons)), float(np.mean(viol))):
+                found.append((T, moved, (cons, viol)))
         if not found:
             return self.redetect(points, s, guesses[0])
         if len(found) == 1:
-            return found[0]
-        return max(found, key=lambda T: self.fit(points @ T[:3, :3].T + T[:3, 3], s))
+            return found[0][0]
+        return max(found, key=lambda f: self.fit(f[1], s, f[2]))[0]
 
     def redetect(self, points: np.ndarray, s: int, prediction: np.ndarray) -> np.ndarray | None:
         """Principal-axes alignments of (N, 3) reference points onto the moving clusters at step
