@@ -38,17 +38,18 @@ MIN_MOVING_NEIGHBOURS = 3
 MAX_OTHER_STEPS = 10
 
 
-def window_stack(depth: np.ndarray) -> np.ndarray:
-    """(9, H, W) the readings [m] of each pixel's 3×3 window (NaN = no reading or off-image)."""
-    pad = np.pad(depth, 1, constant_values=np.nan)
-    h, w = depth.shape
-    return np.stack([pad[i : i + h, j : j + w] for i in range(3) for j in range(3)])
+def padded_depth(depth: np.ndarray) -> np.ndarray:
+    """(H+2, W+2) depth image [m] padded with one NaN pixel on each side (NaN = no reading): the
+    form in which :func:`free_space_test` reads each pixel's 3×3 window (nine gathers per tested
+    point, instead of stacking nine shifted copies of the whole image)."""
+    return np.pad(np.asarray(depth), 1, constant_values=np.nan)
 
 
 def free_space_test(points_world: np.ndarray, camera: CameraInfo, T_world_camera: np.ndarray,
-                    window: np.ndarray, noise: DepthNoise) -> np.ndarray:
+                    padded: np.ndarray, noise: DepthNoise) -> np.ndarray:
     """(N,) int8 verdicts (+1 consistent, −1 violated, 0 unknown) of (N, 3) world points [m]
-    against one depth image, given as its :func:`window_stack` (9, H, W) [m]."""
+    against one depth image, given as its :func:`padded_depth` (H+2, W+2) [m]: each point is
+    compared with the readings of the 3×3 window around the pixel it projects to."""
     R, p = T_world_camera[:3, :3], T_world_camera[:3, 3]
     pc = (points_world - p) @ R
     z = pc[:, 2]
@@ -60,7 +61,8 @@ def free_space_test(points_world: np.ndarray, camera: CameraInfo, T_world_camera
     v[front] = np.round(camera.fy * pc[front, 1] / z[front] + camera.cy).astype(int)
     inside = front & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
     idx = np.flatnonzero(inside)
-    readings = window[:, v[idx], u[idx]]  # (9, n)
+    vi, ui = v[idx], u[idx]  # the window of pixel (v, u) is padded[v:v+3, u:u+3]
+    readings = np.stack([padded[vi + i, ui + j] for i in range(3) for j in range(3)])  # (9, n)
     seen = np.isfinite(readings).any(axis=0)
     idx, readings = idx[seen], readings[:, seen]
     zi = z[idx]
@@ -147,7 +149,7 @@ def motion_status(clouds: list[TimeCloud], cameras: dict[str, CameraInfo], noise
         for j in others:
             for view in clouds[j].views:
                 cam = view.camera or cameras[view.frame.camera]
-                verdict = free_space_test(pts, cam, view.frame.T_world_camera, window_stack(view.depth), noise)
+                verdict = free_space_test(pts, cam, view.frame.T_world_camera, padded_depth(view.depth), noise)
                 violated += verdict < 0
                 consistent += verdict > 0
         status.append(verdict_status(violated, consistent))

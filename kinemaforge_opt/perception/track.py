@@ -86,7 +86,7 @@ from scipy.optimize import minimize_scalar
 from scipy.spatial import cKDTree
 
 from ..io.sequence import CameraInfo
-from .change import MOVING, STATIC, free_space_test, window_stack
+from .change import MOVING, STATIC, free_space_test, padded_depth
 from .clouds import DepthNoise, TimeCloud, downsample
 from .segment import CLUSTER_VOXELS, Plane, clusters
 
@@ -311,7 +311,7 @@ class Tracker:
 
     def windows(self, s: int) -> list[np.ndarray]:
         if s not in self._windows:
-            self._windows[s] = [window_stack(v.depth) for v in self.clouds[s].views]
+            self._windows[s] = [padded_depth(v.depth) for v in self.clouds[s].views]
         return self._windows[s]
 
     def moving_clusters(self, s: int) -> list[np.ndarray]:

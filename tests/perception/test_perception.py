@@ -12,7 +12,7 @@ import pytest
 from kinemaforge_opt.errors import DataError
 from kinemaforge_opt.io.sequence import CameraInfo, Frame, load_sequence, depth_to_png, write_png, write_sequence_json
 from kinemaforge_opt.perception import backproject, estimate_depth_noise, free_space_test, reconstruct_sequence
-from kinemaforge_opt.perception.change import window_stack
+from kinemaforge_opt.perception.change import padded_depth
 from kinemaforge_opt.perception.clouds import DepthNoise
 from kinemaforge_opt.perception.segment import clusters, environment_planes
 from kinemaforge_opt.perception.track import pca_alignments
@@ -52,7 +52,7 @@ def test_free_space_test_verdicts():
     depth = np.full((CAM.height, CAM.width), 2.0)
     noise = DepthNoise(0.001, 0.001)
     pts = np.array([[0.0, 0.0, 2.0], [0.0, 0.0, 1.0], [0.0, 0.0, 3.0], [100.0, 0.0, 1.0]])
-    verdict = free_space_test(pts, CAM, np.eye(4), window_stack(depth), noise)
+    verdict = free_space_test(pts, CAM, np.eye(4), padded_depth(depth), noise)
     assert verdict.tolist() == [1, -1, 0, 0]  # on surface, seen through, occluded, out of view
 
 
