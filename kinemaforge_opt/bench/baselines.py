@@ -14,7 +14,7 @@ velocity noise): at standstill, dry friction holds whatever force is applied and
 of sign(v), the usual exclusion in friction identification.  Both use the same fit / held-out
 split as ``diagnose`` and the same evidence rule: BIC on the
 effective number of independent residuals N(1 - ρ)/(1 + ρ) (ρ: lag-1 autocorrelation), the
-same threshold (:data:`kinemaforge_opt.physics.diagnose.DELTA_BIC`).  Neither is told the
+same threshold (:data:`kinemaforge_opt.physics.selection.DELTA_BIC`).  Neither is told the
 concealed effects.
 """
 
@@ -28,7 +28,7 @@ import numpy as np
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..nlp.sensitivity import lag1_autocorrelation
-from ..physics.diagnose import DELTA_BIC
+from ..physics.selection import DELTA_BIC
 from ..nlp.joint_space import noise_std
 from ..physics.locate import THRESHOLD_SIGMA, inverse_dynamics_residual, smooth_derivatives
 from ..synth.effects import unit_of

@@ -4,7 +4,7 @@ A discovery method can only be asked to find an effect the data support.  The or
 truth: it fits the whole recording (``diagnose``'s joint-space collocation, noise level and
 friction smoothing) once with the nominal model and once with the true effects' parameters free,
 started at their true values, and scores the gain with the information criterion ``diagnose``
-selects by: ΔBIC = n ln(RSS_true / RSS_nominal) + k ln n.  At or above ``diagnose.DELTA_BIC``
+selects by: ΔBIC = n ln(RSS_true / RSS_nominal) + k ln n.  At or above ``selection.DELTA_BIC``
 even the truth, fitted from the right start, does not explain the recording better than the
 nominal model by the margin a BIC selection demands: either the data do not show the effect,
 or this transcription of the dynamics cannot represent it at the recording's rate, or the true
@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..physics.diagnose import _free_for, _n_params, _rss_q, before_nominal_stops
+from ..physics.diagnose import before_nominal_stops
+from ..physics.search import effect_parameters
+from ..physics.selection import n_free_params, rss_q
 from ..physics.search import HypothesisFit
 from ..nlp.joint_space import friction_smoothing, match_recording, noise_std
 from ..synth.effects import ConcealedEffect, tilted_axis
@@ -62,11 +64,11 @@ def oracle_delta_bic(er: EffectRecording) -> float | None:
              for e in effects if e.type == "limit_contact"}
     fit = HypothesisFit(model, fit_rec, hyps, None, stops, ORACLE_MAX_ITER, sigma, friction_smoothing(fit_rec))
     nominal = fit.solve([])
-    names = [n for e in effects for n in _free_for(model, e.joint, e.type)]
+    names = [n for e in effects for n in effect_parameters(model, e.joint, e.type)]
     init = {k: v for e in effects for k, v in true_start(model, e).items()}
     truth = fit.solve(names, start=nominal, init=init, states_from_data=True)
     if not (nominal.success and truth.success):
         return None
     n = fit_rec.q.size
-    gain = _rss_q(truth.q_fit, fit_rec.q, sigma) / _rss_q(nominal.q_fit, fit_rec.q, sigma)
-    return float(n * np.log(gain) + _n_params(names) * np.log(n))
+    gain = rss_q(truth.q_fit, fit_rec.q, sigma) / rss_q(nominal.q_fit, fit_rec.q, sigma)
+    return float(n * np.log(gain) + n_free_params(names) * np.log(n))

@@ -23,7 +23,9 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from ..physics.diagnose import DELTA_BIC, STATE_WINDOW_S, before_nominal_stops, simulate_segments
+from ..physics.diagnose import before_nominal_stops
+from ..physics.predict import STATE_WINDOW_S, simulate_segments
+from ..physics.selection import DELTA_BIC
 from .baselines import BaselineResult, idls, sindy, split
 from .predict import augmented, predict
 from .recordings import effect_recording, other_recording
@@ -101,7 +103,7 @@ def _baseline_after(fitted, laws: dict, held) -> float:
 
 def segment_rms(model, rec, laws: dict | None = None, segment_s: float = OTHER_SEGMENT_S) -> float:
     """RMS error [rad or m] of ``model`` (plus force ``laws``) predicting ``rec`` in ``segment_s``
-    pieces (:func:`~kinemaforge_opt.physics.diagnose.simulate_segments`; the samples each piece's
+    pieces (:func:`~kinemaforge_opt.physics.predict.simulate_segments`; the samples each piece's
     starting state is fitted to are not scored).  A model whose simulation diverges (a baseline's
     fitted law can be unstable) scores inf."""
     try:

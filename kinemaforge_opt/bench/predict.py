@@ -10,7 +10,7 @@ import numpy as np
 
 from ..calibration import apply_parameters
 from ..model.articulated import ArticulatedModel
-from ..physics.diagnose import simulate_recording as predict  # noqa: F401  (the shared protocol)
+from ..physics.predict import simulate_recording as predict  # noqa: F401  (the shared protocol)
 
 ForceLaw = Callable[[float, float], float]
 

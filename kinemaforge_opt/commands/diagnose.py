@@ -60,7 +60,7 @@ def register(sub) -> None:
     p.add_argument("--segment", type=float, default=None, metavar="S",
                    help="fit and predict in segments of S seconds (long oscillating recordings)")
     p.add_argument("--max-effects", type=int, default=None, metavar="N",
-                   help="stop the selection after N effects (default: physics.diagnose.MAX_EFFECTS)")
+                   help="stop the selection after N effects (default: physics.selection.MAX_EFFECTS)")
     p.add_argument("--other", nargs="*", default=(), metavar="CSV",
                    help="further recordings of the same system: compared before/after; under model-form error "
                         "the first one with signal also judges acceptance (see below)")
@@ -71,7 +71,7 @@ def run(args) -> int:
     from tqdm import tqdm
 
     from ..errors import InputFileError
-    from ..physics.diagnose import MAX_EFFECTS
+    from ..physics.selection import MAX_EFFECTS
 
     if args.max_effects is not None and args.max_effects < 1:
         raise InputFileError(f"--max-effects must be at least 1, got {args.max_effects}")

@@ -5,7 +5,7 @@ import numpy as np
 
 from kinemaforge_opt.bench.detectability import oracle_delta_bic
 from kinemaforge_opt.bench.recordings import effect_recording
-from kinemaforge_opt.physics.diagnose import DELTA_BIC
+from kinemaforge_opt.physics.selection import DELTA_BIC
 
 
 def test_a_visible_damping_is_supported_far_beyond_the_selection_margin():

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinemaforge_opt.physics.diagnose import Diagnosis, FoundEffect, HeldOut, prediction_signal
+from kinemaforge_opt.physics.diagnose import Diagnosis, FoundEffect
+from kinemaforge_opt.physics.predict import HeldOut, prediction_signal
 
 
 def _held(err_per_joint, T=200):
@@ -87,7 +88,7 @@ def test_summary_says_a_held_out_span_without_signal_says_nothing():
 
 
 def test_quantisation_sigma_is_the_encoder_step_over_root_twelve():
-    from kinemaforge_opt.physics.diagnose import quantisation_sigma
+    from kinemaforge_opt.physics.predict import quantisation_sigma
 
     step = 2 * np.pi / 2048
     t = np.linspace(0, 3, 300)

@@ -138,7 +138,7 @@ def test_a_stop_the_data_cannot_place_is_unsupported():
     the interval places it (±0.02 rad near the extreme).  End to end, the discovery bench's
     stop cases keep their stops under this rule (tests/physics/test_search.py)."""
     from kinemaforge_opt.calibration import Calibration, Estimate
-    from kinemaforge_opt.physics.diagnose import _interval_holds_off
+    from kinemaforge_opt.physics.selection import interval_holds_off
 
     obj = make_object("cabinet", 0)
     joint = obj.model.joint_names[0]
@@ -150,17 +150,17 @@ def test_a_stop_the_data_cannot_place_is_unsupported():
                            np.zeros((1, 1)), None, 0.0)
 
     motion = (0.0, 1.81)
-    assert _interval_holds_off(obj.model, joint, "limit_contact", calibration(-0.75, 2.57), motion) == 1.0
-    assert _interval_holds_off(obj.model, joint, "limit_contact", calibration(1.78, 1.82), motion) is None
+    assert interval_holds_off(obj.model, joint, "limit_contact", calibration(-0.75, 2.57), motion) == 1.0
+    assert interval_holds_off(obj.model, joint, "limit_contact", calibration(1.78, 1.82), motion) is None
     # a stop the model already holds is not the search's to drop
     held = dataclasses.replace(obj.model.joint(joint).dynamics, limit_stop=1.8, limit_stiffness=50.0)
-    assert _interval_holds_off(obj.model.with_joint(joint, dynamics=held), joint, "limit_contact",
+    assert interval_holds_off(obj.model.with_joint(joint, dynamics=held), joint, "limit_contact",
                                calibration(-0.75, 2.57), motion) is None
 
 
 def test_prediction_gain_is_counted_in_noise_sigmas_per_joint():
     """HeldOut.gain_sigma: the drop of the RMS prediction error, each joint in its own noise."""
-    from kinemaforge_opt.physics.diagnose import HeldOut
+    from kinemaforge_opt.physics.predict import HeldOut
 
     q = np.zeros((4, 2))
     before = q + np.array([0.02, 0.2])  # 2 sigma on both joints

@@ -9,12 +9,8 @@ import pytest
 
 from kinemaforge_opt.calibration import apply_parameters
 from kinemaforge_opt.io.recording import Recording
-from kinemaforge_opt.physics.diagnose import (
-    block_average,
-    diagnose,
-    predict_before_after,
-    search_decimation,
-)
+from kinemaforge_opt.physics.diagnose import block_average, diagnose, search_decimation
+from kinemaforge_opt.physics.predict import predict_before_after
 from kinemaforge_opt.synth.effects import ConcealedEffect as E
 from kinemaforge_opt.synth.groundtruth import HandPlan, simulate
 from kinemaforge_opt.synth.objects import make_object

@@ -1,0 +1,200 @@
+"""Open-loop predictions of a recording: a model simulated under the recorded forcing, each
+span (or each piece of it) from the state that best fits its first ``STATE_WINDOW_S``, and the
+before/after comparison (:class:`HeldOut`) that :func:`~kinemaforge_opt.physics.diagnose.diagnose`
+and the benchmarks score.  Pinocchio's ABA integrated by LSODA (scipy)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..io.recording import Recording
+from ..model.articulated import ArticulatedModel
+from ..model.pinocchio import build_pin_model
+
+# Held-out prediction: each model's starting state is fitted over this first part of a span [s]
+# (see simulate_recording); the rest of the span is the prediction that is scored.
+STATE_WINDOW_S = 0.3
+
+# Simulations (held-out and fit-span checks): LSODA tolerances (relative, absolute [rad or m]),
+# far below the encoder noise; the starting state's least-squares fit differentiates them with
+# this fixed step in its scaled variables (q [rad or m], v × window [rad or m]).
+SIM_RTOL, SIM_ATOL = 1e-5, 1e-7
+
+STATE_FIT_STEP = 1e-4
+
+# ... and stops once an iteration changes its squared error or its scaled state by less than this
+# fraction (a 0.01 % change of the error is far below anything a prediction is judged by;
+# MINPACK's default, 1e-8, spent about twice the integrations on digits below the noise).
+STATE_FIT_TOL = 1e-4
+
+
+@dataclass(frozen=True)
+class HeldOut:
+    """Prediction on the held-out span: RMS joint error [rad or m] and per-joint error (T, n)."""
+
+    t: np.ndarray
+    q_rec: np.ndarray
+    q_before: np.ndarray
+    q_after: np.ndarray
+
+    @property
+    def rms_before(self) -> float:
+        return float(np.sqrt(np.mean((self.q_before - self.q_rec) ** 2)))
+
+    @property
+    def rms_after(self) -> float:
+        return float(np.sqrt(np.mean((self.q_after - self.q_rec) ** 2)))
+
+    def gain_sigma(self, sigma_q: np.ndarray) -> float:
+        """How much better the after-model predicts, in noise sigmas: the drop of the RMS error
+        normalised per joint by ``sigma_q`` (n,) and pooled over joints."""
+        s = np.maximum(np.asarray(sigma_q, float), 1e-12)
+        rms = [float(np.sqrt(np.mean(((q - self.q_rec) / s) ** 2))) for q in (self.q_before, self.q_after)]
+        return rms[0] - rms[1]
+
+
+def prediction_signal(h: HeldOut, sigma_q: np.ndarray) -> float:
+    """How far the nominal ("before") prediction of a span errs, in noise sigmas: the largest
+    per-joint RMS of (q_before - q_rec) / sigma_q.  Below THRESHOLD_SIGMA the span shows nothing
+    the nominal model gets wrong (e.g. a pendulum at rest at encoder resolution), so no effect can
+    predict it better: it cannot judge one."""
+    if h.t.size == 0:
+        return 0.0
+    return float(np.max(np.sqrt(np.mean((h.q_before - h.q_rec) ** 2, axis=0)) / np.maximum(sigma_q, 1e-12)))
+
+
+def quantisation_sigma(q: np.ndarray) -> np.ndarray:
+    """Per joint (n,), the standard deviation of the rounding error of a quantised sensor [rad or
+    m]: its step (the smallest non-zero change between samples of ``q`` (T, n)) / sqrt(12); about
+    0 for an unquantised one.  The high-frequency noise estimate of a quantised encoder that
+    mostly stands still can fall below it."""
+    d = np.abs(np.diff(q, axis=0))
+    d = np.where(d > 1e-12, d, np.inf)
+    step = d.min(axis=0) if d.size else np.full(q.shape[1], np.inf)
+    return np.where(np.isfinite(step), step, 0.0) / np.sqrt(12.0)
+
+
+def simulate_segments(model: ArticulatedModel, rec: Recording, segment_s: float | None,
+                      extra: dict | None = None) -> np.ndarray:
+    """q (T, n) of ``model`` (plus ``extra`` force laws, see :func:`simulate_recording`) on ``rec``,
+    segment by segment when ``segment_s`` [s] is given, each from its own best state over the
+    first ``STATE_WINDOW_S`` of a segment; NaN over those fitted samples and over a segment too
+    short to estimate a starting state."""
+    edges = [rec.t[0]] if not segment_s else list(np.arange(rec.t[0], rec.t[-1], segment_s))
+    edges.append(rec.t[-1] + 1e-9)
+    parts = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        m = (rec.t >= a) & (rec.t < b)
+        if m.sum() < 8:
+            parts.append(np.full((m.sum(), rec.q.shape[1]), np.nan))
+            continue
+        seg = rec.window(rec.t[m][0], rec.t[m][-1])
+        parts.append(simulate_recording(model, seg, extra, state_window_s=STATE_WINDOW_S))
+    return np.vstack(parts)
+
+
+def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec: Recording, segment_s: float | None) -> HeldOut:
+    """Simulated q of both models on ``rec`` (:func:`simulate_segments`), scored where both are
+    predictions."""
+    q_b = simulate_segments(before, rec, segment_s)
+    q_a = q_b if after is before else simulate_segments(after, rec, segment_s)
+    ok = ~(np.isnan(q_b).any(axis=1) | np.isnan(q_a).any(axis=1))
+    return HeldOut(rec.t[ok], rec.q[ok], q_b[ok], q_a[ok])
+
+
+def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | None = None,
+                       state_window_s: float | None = None) -> np.ndarray:
+    """q (T, n) of ``model`` simulated over ``rec`` under its recorded tau, with the model's joint
+    dynamics plus optional per-joint ``extra`` force laws f(q, v) [N·m or N].  Pinocchio ABA,
+    integrated by LSODA (scipy).
+
+    The initial state is the smoothed first state of the recording, or, with ``state_window_s``
+    [s], the state that best reproduces (least squares) the model's motion over the first
+    ``state_window_s`` of the recording — each model gets its own best starting state, as an
+    observer would give it; those samples are then fitted, not predicted, and come back as NaN.
+    (A state differentiated from a few noisy samples at the edge of a span can be so far off
+    that it dominates the prediction error of every model alike.)"""
+    from bisect import bisect_right
+
+    import pinocchio as pin
+    from scipy.integrate import solve_ivp
+    from scipy.optimize import least_squares
+
+    from .locate import smooth_derivatives
+
+    pm = build_pin_model(model)
+    pd = pm.createData()
+    joints = model.movable_joints
+    n = len(joints)
+    laws = [(extra or {}).get(j.name) for j in joints]
+    q0, v0, _ = smooth_derivatives(rec)
+    tau = rec.tau if rec.tau is not None else np.zeros((rec.t.size, n))
+
+    # Per joint, its passive force terms (the model's joint dynamics, then the extra law), looked
+    # up once: the right-hand side runs ~10^4 times per simulated second.
+    from .effects import EFFECTS, dynamics_effects, effect_arguments
+
+    terms = [[(EFFECTS[e].force, *effect_arguments(j.dynamics, e)) for e in dynamics_effects(j.dynamics)]
+             for j in joints]
+    # tau linear between samples (held at the ends): per interval i its start and slope
+    t_list, last = rec.t.tolist(), rec.t.size - 1
+    slope = np.diff(tau, axis=0) / np.diff(rec.t)[:, None]
+    max_step = float(np.min(np.diff(rec.t)))
+    out = np.empty(2 * n)
+
+    def rhs(t, x):
+        q, v = x[:n], x[n:]
+        i = min(max(bisect_right(t_list, t) - 1, 0), last - 1)
+        u = tau[i] + slope[i] * min(max(t - t_list[i], 0.0), t_list[i + 1] - t_list[i])
+        for k in range(n):
+            for force, params, kwargs in terms[k]:
+                u[k] += force(q[k], v[k], *params, **kwargs)
+            if laws[k] is not None:
+                u[k] += laws[k](q[k], v[k])
+        out[:n] = v
+        out[n:] = pin.aba(pm, pd, q, v, u)
+        return out.copy()
+
+    def run(x0: np.ndarray, t_eval: np.ndarray) -> np.ndarray:
+        # max_step: one sample interval, so a force pulse after a free coast is never stepped over
+        # (LSODA grows its step on the smooth, force-free stretch and jumped whole pushes)
+        sol = solve_ivp(rhs, (t_eval[0], t_eval[-1]), x0, t_eval=t_eval, method="LSODA", rtol=SIM_RTOL, atol=SIM_ATOL,
+                        max_step=max_step)
+        q = sol.y[:n].T
+        if q.shape[0] < t_eval.size:  # integration stopped early: hold the last state
+            q = np.vstack([q, np.repeat(q[-1:], t_eval.size - q.shape[0], axis=0)])
+        return q
+
+    x0 = np.concatenate([q0[0], v0[0]])
+    window = np.zeros(rec.t.size, dtype=bool)
+    if state_window_s:
+        window = rec.t <= rec.t[0] + state_window_s
+        if window.sum() >= max(5, 2 * n + 1) and window.sum() < rec.t.size:
+            tw = rec.t[window]
+            scale = np.concatenate([np.full(n, 1.0), np.full(n, 1.0 / max(tw[-1] - tw[0], 1e-9))])
+
+            seen: dict[bytes, np.ndarray] = {}  # residuals by z: MINPACK asks for the Jacobian where it just evaluated them
+
+            def resid(z):
+                key = np.asarray(z, float).tobytes()
+                if key not in seen:
+                    seen.clear()
+                    seen[key] = (run(z * scale, tw) - rec.q[window]).ravel()
+                return seen[key]
+
+            def jac(z):
+                # forward differences with a fixed step, far above the integration error (MINPACK's
+                # default relative step, ~1e-8, is below it: the Jacobian was noise and the state
+                # fit landed anywhere)
+                r0 = resid(z)
+                return np.stack([(resid(z + STATE_FIT_STEP * e) - r0) / STATE_FIT_STEP for e in np.eye(z.size)], axis=1)
+
+            fit = least_squares(resid, x0 / scale, jac=jac, method="lm", ftol=STATE_FIT_TOL, xtol=STATE_FIT_TOL)
+            x0 = fit.x * scale
+        else:
+            window[:] = False
+    q = run(x0, rec.t)
+    q[window] = np.nan
+    return q

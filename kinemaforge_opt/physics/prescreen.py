@@ -1,0 +1,148 @@
+"""What the nominal model's inverse-dynamics residual force says before any NLP is solved: a
+stop's likely side and position, starting values of an effect's parameters (linear least
+squares on its force per unit parameter), and the linear pre-screen that ranks hypotheses for
+the selection (:mod:`.selection`).  A ranking and a start, never evidence: the NLP fits decide."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..io.recording import Recording
+from ..model.articulated import ArticulatedModel
+from .effects import EFFECTS
+from .locate import inverse_dynamics_residual
+from .search import Trial
+
+
+def limit_stop_guess(model: ArticulatedModel, rec: Recording) -> dict[str, tuple[float, float]]:
+    """Per joint, the side (+1 above the motion, -1 below) and initial position of a hypothetical
+    stop: the recorded extreme at which the nominal inverse-dynamics residual force pushes back
+    hardest (a stop is where the motion turns with a force the model lacks)."""
+    force, q, _, _ = inverse_dynamics_residual(model, rec)
+    out = {}
+    for k, j in enumerate(model.joint_names):
+        lo, hi = float(rec.q[:, k].min()), float(rec.q[:, k].max())
+        band = 0.03 * max(hi - lo, 1e-12)
+        up = -float(np.mean(force[rec.q[:, k] >= hi - band, k]))
+        down = float(np.mean(force[rec.q[:, k] <= lo + band, k]))
+        out[j] = (1.0, hi) if up >= down else (-1.0, lo)
+    return out
+
+
+def stribeck_speeds(v: np.ndarray, eps: float, n: int = 12) -> np.ndarray:
+    """Candidate Stribeck speeds [rad/s or m/s] for a joint moving at speeds ``v`` (T,): a
+    geometric grid from twice the smooth-sign width ``eps`` (a Stribeck speed below it has no
+    shape the fit can see) to half the peak speed (above it the excess never fades within the
+    recording: Coulomb friction by another name; the NLP's bound)."""
+    hi = 0.5 * float(np.max(np.abs(v)))
+    lo = min(max(2.0 * eps, 1e-3), hi)
+    return np.geomspace(lo, hi, n) if hi > lo else np.array([hi])
+
+
+def _stribeck_column(v: np.ndarray, vs: float, eps: float) -> np.ndarray:
+    return -np.exp(-((v / vs) ** 2)) * np.tanh(v / eps)
+
+
+def _best_stribeck_speed(v: np.ndarray, r: np.ndarray, eps: float, base: list[np.ndarray], grid: np.ndarray) -> float:
+    """The speed of ``grid`` whose Stribeck column, with the columns ``base``, leaves the least of
+    ``r`` by linear least squares (v, r and the columns on the same samples)."""
+    def left(vs):
+        A = np.stack(base + [_stribeck_column(v, vs, eps)], axis=1)
+        return float(np.sum((r - A @ np.linalg.lstsq(A, r, rcond=None)[0]) ** 2))
+
+    return float(min(grid, key=left))
+
+
+def linear_init(model: ArticulatedModel, joint: str, effect: str, start: Trial, r_nom: np.ndarray,
+                q: np.ndarray, v: np.ndarray, eps: np.ndarray, v_scale: np.ndarray) -> dict[str, np.ndarray]:
+    """Starting values of a force effect's parameters from the inverse-dynamics residual: the
+    nominal model's missing generalised force ``r_nom`` (T, n) at smoothed (q, v), less the
+    effects already in ``start``, regressed (least squares, moving samples only: at standstill
+    dry friction takes any value) on the effect's force per unit parameter.  Most effects are
+    linear in their parameters; the Stribeck speed is the one of :func:`stribeck_speeds` that
+    explains most, a spring's rest position comes from its two linear coefficients (else
+    mid-motion)."""
+    k = model.joint_index(joint)
+    r = r_nom[:, k].copy()
+    for e_type in dict.fromkeys(e for e in EFFECTS if EFFECTS[e].force is not None):
+        ps = [f"{joint}.{p}" for p in EFFECTS[e_type].params]
+        if all(p in start.free for p in ps):
+            r = r - EFFECTS[e_type].force(q[:, k], v[:, k], *[start.values[p][0] for p in ps], eps=float(eps[k]))
+    moving = np.abs(v[:, k]) > 0.05 * v_scale[k]
+    if moving.sum() < 5:
+        return {}
+    qk, vk, rk = q[moving, k], v[moving, k], r[moving]
+    vs = _best_stribeck_speed(vk, rk, float(eps[k]), [], stribeck_speeds(v[:, k], float(eps[k]))) \
+        if effect == "stribeck_friction" else 0.2 * v_scale[k]
+    cols = {
+        "viscous_damping": [-vk], "coulomb_friction": [-np.tanh(vk / eps[k])], "quadratic_drag": [-vk * np.abs(vk)],
+        "constant_bias": [np.ones_like(vk)], "spring": [-qk, np.ones_like(qk)],
+        "stribeck_friction": [_stribeck_column(vk, vs, eps[k])],
+    }.get(effect)
+    out = {}
+    if effect == "stribeck_friction":
+        out[f"{joint}.v_stribeck"] = np.array([vs])
+    if effect == "spring":
+        out[f"{joint}.spring_rest"] = np.array([float(np.mean(q[:, k]))])
+    if cols is None:
+        return out
+    coef = np.linalg.lstsq(np.stack(cols, axis=1), rk, rcond=None)[0]
+    first = EFFECTS[effect].params[0]
+    value = coef[0] if EFFECTS[effect].lower[0] == -np.inf else max(coef[0], 0.0)
+    out[f"{joint}.{first}"] = np.array([value])
+    if effect == "spring" and coef[0] > 0:  # rest from the two coefficients, within a span of the motion
+        lo, hi = float(q[:, k].min()), float(q[:, k].max())
+        out[f"{joint}.spring_rest"] = np.array([np.clip(coef[1] / coef[0], 2 * lo - hi, 2 * hi - lo)])
+    return out
+
+
+def _columns(model: ArticulatedModel, joint: str, effect: str, q: np.ndarray, v: np.ndarray, id_force: np.ndarray,
+             eps: np.ndarray, v_scale: np.ndarray, stops: dict, vs: float | None = None) -> list[np.ndarray]:
+    """Force columns (each (T,)) of ``effect`` on ``joint`` for the linear pre-screen: the effect's
+    force per unit parameter (Stribeck at speed ``vs``, default a fifth of the RMS speed), the rigid-body force M a + h
+    for an inertia ratio, gravity's sin q and cos q for a revolute axis tilt (a constant for a
+    prismatic one), a one-sided ramp from the stop guess for a limit contact."""
+    k = model.joint_index(joint)
+    qk, vk = q[:, k], v[:, k]
+    vs = 0.2 * v_scale[k] if vs is None else vs
+    side, stop = stops[joint]
+    span = float(np.ptp(qk))
+    if effect == "axis_tilt":
+        return [np.ones_like(qk)] if model.joint(joint).type == "prismatic" else [np.sin(qk), np.cos(qk)]
+    return {
+        "viscous_damping": [-vk], "coulomb_friction": [-np.tanh(vk / eps[k])], "quadratic_drag": [-vk * np.abs(vk)],
+        "constant_bias": [np.ones_like(vk)], "spring": [-qk, np.ones_like(qk)],
+        "stribeck_friction": [_stribeck_column(vk, vs, eps[k])],
+        "inertia_error": [id_force[:, k]],
+        "limit_contact": [np.maximum(side * (qk - (stop - side * 0.05 * span)), 0.0)],
+    }[effect]
+
+
+def screen_scores(model: ArticulatedModel, pending: list[tuple[str, str]], selected: list[tuple[str, str]],
+                  r_nom: np.ndarray, id_force: np.ndarray, q: np.ndarray, v: np.ndarray, eps: np.ndarray,
+                  v_scale: np.ndarray, stops: dict) -> dict[tuple[str, str], float]:
+    """Per hypothesis, the share of the nominal inverse-dynamics residual on its joint (moving
+    samples) that the already selected effects on that joint leave and the hypothesis removes
+    too, by joint linear least squares on their force columns (:func:`_columns`; a Stribeck
+    column at the speed of :func:`stribeck_speeds` that explains most); lower = explains
+    more.  A cheap ranking, not evidence: the chosen hypotheses are then fitted by the NLP."""
+    out = {}
+    for joint, effect in pending:
+        k = model.joint_index(joint)
+        moving = np.abs(v[:, k]) > 0.05 * v_scale[k]
+        rk, vk, ek = r_nom[moving, k], v[moving, k], float(eps[k])
+        grid = stribeck_speeds(v[:, k], ek)  # a Stribeck column at the speed that explains most
+        base = [c[moving] for j, e in selected if j == joint
+                for c in _columns(model, j, e, q, v, id_force, eps, v_scale, stops,
+                                  _best_stribeck_speed(vk, rk, ek, [], grid) if e == "stribeck_friction" else None)]
+
+        def left(cols):
+            if not cols:
+                return float(np.sum(rk**2))
+            A = np.stack(cols, axis=1)
+            return float(np.sum((rk - A @ np.linalg.lstsq(A, rk, rcond=None)[0]) ** 2))
+
+        vs = _best_stribeck_speed(vk, rk, ek, base, grid) if effect == "stribeck_friction" else None
+        new = [c[moving] for c in _columns(model, joint, effect, q, v, id_force, eps, v_scale, stops, vs)]
+        out[(joint, effect)] = left(base + new) / max(left(base), 1e-300)
+    return out

@@ -1,0 +1,775 @@
+"""The explain stage of :func:`~kinemaforge_opt.physics.diagnose.diagnose`: stepwise selection
+over the effect library on the search grid (:class:`EffectSearch`), its checks, the full-rate
+re-fits with 95 % intervals, and the reported effects (:class:`FoundEffect`).  The module doc of
+:mod:`.diagnose` states the procedure; the thresholds are here."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..calibration import Calibration
+from ..io.recording import Recording
+from ..model.articulated import ArticulatedModel
+from ..model.pinocchio import build_pin_model, inverse_dynamics
+from ..nlp.joint_space import build_joint_space_fit, match_recording, velocity_estimate
+from .locate import THRESHOLD_SIGMA, inverse_dynamics_residual
+from .predict import HeldOut, predict_before_after, prediction_signal
+from .prescreen import limit_stop_guess, linear_init, screen_scores
+from .search import HypothesisFit, Trial, effect_parameters
+
+DELTA_BIC = -10.0
+
+# An accepted effect must also matter: it must move the fitted trajectory by at least this RMS,
+# in units of the encoder noise (else it only polishes residual model-form error).
+MIN_EFFECT_SIZE_SIGMA = 1.0
+
+# A hypothesis whose fit has not converged after this many IPOPT iterations is not accepted
+# (well-posed candidates converge in 5–30).
+CANDIDATE_MAX_ITER = 200
+
+# BIC counts every residual (N).  Counting only independent ones, N (1 - rho)/(1 + rho) from the
+# residual autocorrelation, was tried: it curbed polishing of model-form error but discounted the
+# first effect of a pair (whose fit still misses the second) below the threshold; the effect-size
+# floor and the final held-out check do that job instead.  Kept as a switch for experiments.
+EFFECTIVE_N = False
+
+# Two hypotheses whose fits differ by less than this in log-likelihood (2 ln L on the effective
+# sample count) explain the recording equally well ("not worth more than a bare mention",
+# Kass & Raftery 1995): the chosen one is reported with the other as an equivalent explanation.
+EQUIVALENT_LOGLIK = 2.0
+
+# The selected effects must also simulate the fit span better than the nominal model, in pieces
+# of this length [s] (each from its own state over its first STATE_WINDOW_S).
+SIMULATION_CHECK_S = 1.0
+
+# Per selection round (and per swap), only this many hypotheses get an NLP fit: those that best
+# reduce the inverse-dynamics residual force in a linear least-squares pre-screen (a ranking, not
+# evidence: the NLP fit and its ΔBIC still decide).
+SCREEN = 5
+
+# Selection stops after this many effects (a bound on the search's cost, not a prior on the
+# system: on the real Qube the fifth, arm Coulomb friction, is the one its recordings need; with 4
+# it was never tested).
+MAX_EFFECTS = 6
+
+# Per selection round, at most this many hypotheses below the model-form floor (strongest ΔBIC
+# first) are judged by their prediction of another recording (:meth:`EffectSearch.prediction_gate`).
+PREDICTION_TRIES = 3
+
+# How many times a selection round may be re-run after the chosen effects were re-fitted to a
+# better optimum from a candidate's solution (see :meth:`EffectSearch.unless_parent_fits_as_well`).
+MAX_PARENT_REFITS = 2
+
+# Effect types tested, in order; the parameters freed for each are its EFFECTS[type].params
+# (first = reported value).
+CANDIDATES: tuple[str, ...] = (
+    "viscous_damping", "coulomb_friction", "spring", "constant_bias", "quadratic_drag",
+    "stribeck_friction", "axis_tilt", "inertia_error", "limit_contact",
+)
+
+
+@dataclass(frozen=True)
+class FoundEffect:
+    """A selected effect: DESIGN.md ``type``, ``value`` in ``unit``, ``ci95``, ``delta_bic``, and
+    extra ``params`` (e.g. spring ``rest``, tilt ``axis_world``)."""
+
+    joint: str
+    type: str
+    value: float
+    unit: str
+    ci95: tuple[float, float]
+    delta_bic: float
+    params: dict
+
+    def to_dict(self) -> dict:
+        return {"joint": self.joint, "type": self.type, "value": self.value, "unit": self.unit,
+                "ci95": list(self.ci95), "delta_bic": self.delta_bic, "params": self.params}
+
+
+def span_words(span: str | None) -> str:
+    """Plain words for an acceptance-check span name ("held_out", "other_recording_<k>")."""
+    if span == "held_out":
+        return "held-out span"
+    if span and span.startswith("other_recording_"):
+        return f"other recording {span.rsplit('_', 1)[1]}"
+    return "held-out span"
+
+
+def _reported_value(model: ArticulatedModel, joint: str, effect: str, values: dict) -> float:
+    """DESIGN.md ``value`` of ``effect`` on ``joint`` from fitted parameter values (tilt: the angle
+    between fitted and nominal axis [rad])."""
+    name = effect_parameters(model, joint, effect)[0]
+    if effect == "axis_tilt":
+        a = np.asarray(values[name], float)
+        return float(np.arccos(np.clip(abs(np.dot(a / np.linalg.norm(a), model.joint(joint).axis)), -1, 1)))
+    return float(np.asarray(values[name]).ravel()[0])
+
+
+def _model_of(model: ArticulatedModel, trial: Trial, stops: dict) -> ArticulatedModel:
+    """``model`` with the free parameters of ``trial`` at their fitted values (a limit contact's
+    stop on the side :func:`limit_stop_guess` gave it)."""
+    from ..calibration import apply_parameters
+
+    return apply_parameters(model, {n: trial.values[n] for n in trial.free}, stops)
+
+
+def rss_q(q_fit: np.ndarray, q_rec: np.ndarray, sigma_q: np.ndarray) -> float:
+    return float(np.sum(((q_fit - q_rec) / sigma_q) ** 2))
+
+
+def effective_count(residuals: np.ndarray) -> float:
+    """Number of independent residuals among ``residuals`` (T, n): N (1 - rho)/(1 + rho), rho the
+    pooled lag-1 autocorrelation of the per-joint series (white noise keeps N)."""
+    from ..nlp.sensitivity import lag1_autocorrelation
+
+    rho = lag1_autocorrelation(np.atleast_2d(residuals.T))
+    return float(residuals.size * (1 - rho) / (1 + rho))
+
+
+def _at_bound_values(trial: Trial, names: list[str], nominal_z: dict) -> bool:
+    """True when the effect's reported parameter sits at its physical lower bound (zero) where the
+    model already had it (the fit did not move it: it explains nothing); a parameter the model
+    had non-zero and the data drives to zero is a finding."""
+    name = names[0]
+    if name.endswith(".limit_stop"):  # no stiffness, or a stop pinned at the edge of where it is identifiable
+        lo, hi = (trial.bounds or {}).get(name, (-np.inf, np.inf))
+        stop = trial.values[name][0]
+        at_edge = min(abs(stop - lo), abs(stop - hi)) <= 1e-6 * max(1.0, abs(stop))
+        return bool(abs(trial.z[names[1]][0]) <= 1e-6 or at_edge)
+    if name.endswith(".stribeck"):  # a speed scale pinned at the top of its identifiable range is Coulomb friction
+        lo, hi = (trial.bounds or {}).get(names[1], (-np.inf, np.inf))
+        vs = trial.values[names[1]][0]
+        if abs(vs - hi) <= 1e-3 * abs(hi):
+            return True
+    if name.endswith((".axis", ".inertia_ratio", ".spring_rest", ".bias")):
+        return False
+    return bool(abs(trial.z[name][0]) <= 1e-6 and abs(nominal_z[name][0]) <= 1e-6)
+
+
+def _calibration(model: ArticulatedModel, rec: Recording, trial: Trial, effects: list[tuple[str, str]],
+                 stops: dict, segment_s: float | None, sigma_q: np.ndarray, eps: np.ndarray | None = None,
+                 fit=None) -> Calibration:
+    """A :class:`Calibration` of ``model`` with the parameters of ``effects`` at the values of
+    ``trial`` (95 % intervals from the fit's sensitivity).  fit: the joint-space fit of exactly
+    those parameters on ``rec`` if already built (a :class:`HypothesisFit`'s), else built here."""
+    from ..calibration import _result
+    from ..nlp.problem import Result
+
+    if fit is None:
+        names = [n for j, e in effects for n in effect_parameters(model, j, e)]
+        fit = build_joint_space_fit(model, rec, names, energy="off", segment_s=segment_s, limit_stops=stops,
+                                    sigma_q=sigma_q, friction_eps=eps)
+    z = np.concatenate([trial.z[b.name] for b in fit.blocks]) if fit.blocks else np.zeros(0)
+    res = Result(trial.success, trial.status, trial.iterations, float("nan"), {}, {}, {}, trial.solve_time_s)
+    return _result(fit, res, trial.X, z, trial.solve_time_s)
+
+
+def interval_holds_off(model: ArticulatedModel, joint: str, effect: str, final: Calibration,
+                        motion: tuple[float, float] | None = None) -> float | None:
+    """For an effect the model lacked (its parameter's nominal is its "off" value: zero force,
+    unit inertia ratio, the nominal axis), how far inside its 95 % interval the off value sits
+    (0 at an end, 1 in the middle), or None when the interval excludes it (a supported effect) or
+    the model already had it.  A stop has no off value of its position; it is unsupported (1.0)
+    when its position's interval holds the whole recorded ``motion`` (lowest, highest position):
+    the data cannot place it, and what it fits is a one-sided spring over the motion."""
+    e = final.estimates[effect_parameters(model, joint, effect)[0]]
+    if effect == "axis_tilt":
+        angle = _reported_value(model, joint, effect, {e.name: e.value})
+        half = e.ci95_angle_rad
+        return None if half is None or not np.isfinite(half) or angle > half else 1.0 - angle / max(half, 1e-300)
+    if _model_had(model, joint, effect, e):
+        return None
+    lo, hi = float(np.ravel(e.ci95_low)[0]), float(np.ravel(e.ci95_high)[0])
+    if effect == "limit_contact":
+        return 1.0 if motion is not None and lo <= motion[0] and hi >= motion[1] else None
+    off = _off_value(effect)
+    if not (np.isfinite(lo) and np.isfinite(hi)) or not lo <= off <= hi or hi <= lo:
+        return None
+    return 1.0 - abs(2.0 * off - lo - hi) / (hi - lo)
+
+
+def _interval_words(model: ArticulatedModel, joint: str, effect: str, final: Calibration,
+                    motion: tuple[float, float]) -> str:
+    """Why :func:`interval_holds_off` finds ``effect`` unsupported, in words with the numbers."""
+    e = final.estimates[effect_parameters(model, joint, effect)[0]]
+    if effect == "axis_tilt":
+        return f"the tilt's 95% interval (±{e.ci95_angle_rad:.3g} rad) holds the nominal axis"
+    lo, hi = float(np.ravel(e.ci95_low)[0]), float(np.ravel(e.ci95_high)[0])
+    if effect == "limit_contact":
+        return (f"the stop's 95% interval [{lo:.4g}, {hi:.4g}] {e.unit} holds every recorded position, "
+                f"{motion[0]:.4g} to {motion[1]:.4g} {e.unit}: the data cannot place it")
+    return f"its 95% interval [{lo:.4g}, {hi:.4g}] {e.unit} holds its off value {_off_value(effect):g}"
+
+
+def _off_value(effect: str) -> float:
+    """The value of an effect's first parameter that switches it off (unit inertia ratio, else 0)."""
+    return 1.0 if effect == "inertia_error" else 0.0
+
+
+def _model_had(model: ArticulatedModel, joint: str, effect: str, estimate) -> bool:
+    """Whether ``model`` already had ``effect`` on ``joint`` (so a fit changed its value): a stop
+    its dynamics hold, or a first parameter whose nominal ``estimate`` is not the off value."""
+    if effect == "limit_contact":
+        return model.joint(joint).dynamics.limit_stiffness > 0
+    return abs(float(np.ravel(estimate.nominal)[0]) - _off_value(effect)) > 1e-12
+
+
+def n_free_params(names: list[str]) -> int:
+    """Free scalar parameters of the named blocks (an axis direction has 2)."""
+    return sum(2 if n.endswith(".axis") else 1 for n in names)
+
+
+def _axis_world(model: ArticulatedModel, joint: str) -> np.ndarray:
+    import pinocchio as pin
+
+    pm = build_pin_model(model)
+    pd = pm.createData()
+    pin.forwardKinematics(pm, pd, np.zeros(pm.nq))
+    j = model.joint(joint)
+    return pd.oMi[pm.getJointId(joint)].rotation @ j.axis
+
+
+class EffectSearch:
+    """The explain stage (module doc, step 2) on the search grid ``srch``: the shared hypothesis
+    fits, the nominal fit, and the selection as it stands — ``selected`` [(joint, effect, ΔBIC)],
+    its fit ``current``, the alternatives that fit as well as each selected effect
+    (``equivalents``), the record of every test (``tested``) and the effects each later check
+    dropped (``dropped``).  Its methods are the stages of the selection, run in order by
+    :func:`~kinemaforge_opt.physics.diagnose.diagnose`.
+
+    sigma_q (n,): the encoder noise of one recorded sample; sigma_s (n,): the noise of the
+    search grid's block means; sigma_signal (n,): the level a span's nominal prediction error
+    must pass to show signal; eps (n,): the smooth-sign width [rad/s or m/s]."""
+
+    def __init__(self, model: ArticulatedModel, srch: Recording, sigma_q: np.ndarray, sigma_s: np.ndarray,
+                 sigma_signal: np.ndarray, eps: np.ndarray, candidates: tuple[str, ...], segment_s: float | None,
+                 screen: int | None, other_recordings: tuple[Recording, ...], say):
+        self.model, self.srch = model, srch
+        self.sigma_q, self.sigma_s, self.sigma_signal, self.eps = sigma_q, sigma_s, sigma_signal, eps
+        self.candidates, self.segment_s, self.screen = candidates, segment_s, screen
+        self.other_recordings, self.say = other_recordings, say
+        self.stops = limit_stop_guess(model, srch)
+        self.hyps = [(j, e) for j in model.joint_names for e in candidates if e != "axis_tilt"]
+        self.fits = {"base": HypothesisFit(model, srch, self.hyps, segment_s, self.stops, CANDIDATE_MAX_ITER,
+                                           sigma_s, eps)}
+        self.nominal_trial = self.fits["base"].solve([])
+        self.nominal_z = {n: self.fits["base"].nominal_z(n) for n in self.fits["base"].blocks}
+        self.v_scale = np.sqrt(np.mean(velocity_estimate(srch) ** 2, axis=0))
+        # the missing generalised force, on the search grid (block means: full-rate accelerations
+        # are mostly differentiated noise, which the inertia column of the pre-screen then "explains")
+        self.r_nom, self.q_s, self.v_s, a_s = inverse_dynamics_residual(model, srch)
+        self.id_force = inverse_dynamics(model, self.q_s, self.v_s, a_s)
+        self.nominal_model = _model_of(model, self.nominal_trial, self.stops)
+        self.n_res = srch.q.size
+        # The prediction gate's judge (``prediction_gate``): the first other recording whose
+        # nominal prediction errs by THRESHOLD_SIGMA noise sigmas or more, found on first use.
+        self.judge: dict = {}
+        self.selected: list[tuple[str, str, float]] = []
+        self.gated_in: set[tuple[str, str]] = set()  # selected through prediction_gate
+        self.equivalents: dict[tuple[str, str], list[dict]] = {}
+        self.tested: list[dict] = []
+        self.dropped: dict[str, list[str]] = {}
+        self.current = self.nominal_trial
+
+    # --- fits ------------------------------------------------------------------------------
+
+    def rss(self, trial: Trial) -> float:
+        """Noise-normalised residual sum of squares of ``trial``'s fit of the search grid."""
+        return rss_q(trial.q_fit, self.srch.q, self.sigma_s)
+
+    def chosen(self) -> list[tuple[str, str]]:
+        """The selected (joint, effect) pairs."""
+        return [x[:2] for x in self.selected]
+
+    def fit_for(self, effects: list[tuple[str, str]]) -> HypothesisFit:
+        """The shared fit that holds ``effects`` (one with symbolic axes only when a tilt is among
+        them: the symbolic axis makes the fit's build dearer, so it is built on demand)."""
+        if not any(e == "axis_tilt" for _, e in effects):
+            return self.fits["base"]
+        if "axis" not in self.fits:
+            tilts = [(j, "axis_tilt") for j in self.model.joint_names if "axis_tilt" in self.candidates]
+            self.fits["axis"] = HypothesisFit(self.model, self.srch, self.hyps + tilts, self.segment_s, self.stops,
+                                              CANDIDATE_MAX_ITER, self.sigma_s, self.eps)
+        return self.fits["axis"]
+
+    def trial_of(self, effects: list[tuple[str, str]], start: Trial) -> Trial:
+        """The hypothesis ``effects`` fitted with states from the data and the values ``start``
+        holds; a new force coefficient starts from its inverse-dynamics estimate."""
+        model, srch = self.model, self.srch
+        names = [n for j, e in effects for n in effect_parameters(model, j, e)]
+        init, bounds, coefficient = {}, {}, {}
+        for j, e in effects:
+            k = model.joint_index(j)
+            carried = all(n in start.free for n in effect_parameters(model, j, e))  # values from the parent fit
+            if not carried:
+                lin = linear_init(model, j, e, start, self.r_nom, self.q_s, self.v_s, self.eps, self.v_scale)
+                first = effect_parameters(model, j, e)[0]
+                init.update({n: x for n, x in lin.items() if n != first})
+                if first in lin:
+                    coefficient[first] = lin[first]
+            if e == "stribeck_friction":
+                # A Stribeck excess is static friction that fades with speed: identifiable only if
+                # it fades within the recorded speeds (else it is Coulomb friction by another name).
+                b = self.fit_for([(j, e)]).blocks[f"{j}.v_stribeck"]
+                bounds[f"{j}.v_stribeck"] = (float(b.lower[0]), 0.5 * float(np.max(np.abs(self.v_s[:, k]))))
+            if e == "limit_contact":  # start in contact, 5 % of the range before the extreme, with a stiffness
+                # whose force over that penetration is the recording's force scale
+                span = float(np.ptp(srch.q[:, k]))
+                # A stop is identifiable only if the recording both moves free of it and touches
+                # it: keep it inside the half of the recorded range on its side (else a "stop"
+                # beyond all the data is just a spring).
+                lo, hi = float(srch.q[:, k].min()), float(srch.q[:, k].max())
+                side, stop = self.stops[j]
+                bounds[f"{j}.limit_stop"] = (lo + 0.5 * span, hi) if side > 0 else (lo, hi - 0.5 * span)
+                if carried:
+                    continue
+                init[f"{j}.limit_stop"] = np.array([stop - side * 0.05 * span])
+                init[f"{j}.limit_stiffness"] = self.fit_for([(j, e)]).blocks[f"{j}.limit_stiffness"].scale * 0.01 \
+                    * float(np.std(srch.q[:, k])) / (0.05 * span)
+        # States start from the recording, not the parent's trajectory: an effect can act where the
+        # data went but the parent's fit did not (a stop), and a parent trajectory can hold a new
+        # coefficient in a poor basin (dry friction).
+        hf = self.fit_for(effects)
+        if coefficient:
+            # Dry friction and stops make the fit multimodal: the new coefficients start from
+            # their inverse-dynamics estimate, and only if that fit does not converge from their
+            # "off" values too.  (With both starts always run, on the 23 cases of the quick
+            # discovery set at 100 Hz, the off start never fitted better than a converged
+            # estimate start: 134 of 145 pairs alike, 5 better from the estimate, 4 where only
+            # the off start converged.)
+            trial = hf.solve(names, start=start, init={**init, **coefficient}, states_from_data=True, bounds=bounds)
+            if trial.success:
+                return trial
+        return hf.solve(names, start=start, init=init, states_from_data=True, bounds=bounds)
+
+    def trial_of_parent(self, effects: list[tuple[str, str]], start: Trial) -> Trial:
+        """The hypothesis ``effects`` fitted from ``start``'s states and values (its other
+        effects fixed off)."""
+        names = [n for j, e in effects for n in effect_parameters(self.model, j, e)]
+        return self.fit_for(effects).solve(names, start=start,
+                                           bounds={n: b for n, b in (start.bounds or {}).items() if n in names})
+
+    def model_of(self, trial: Trial) -> ArticulatedModel:
+        return _model_of(self.model, trial, self.stops)
+
+    # --- predictions ---------------------------------------------------------------------
+
+    def judge_span(self) -> tuple[str, Recording] | None:
+        """(name, recording) of the first other recording whose nominal prediction errs by
+        THRESHOLD_SIGMA noise sigmas or more, or None (looked for once)."""
+        if "span" not in self.judge:
+            self.judge["span"] = None
+            for k, o in enumerate(self.other_recordings):
+                span = match_recording(self.model, o)
+                self.say(f"checking whether other recording {k + 1} can judge effects below the model-form floor")
+                h = predict_before_after(self.nominal_model, self.nominal_model, span, self.segment_s)
+                signal = prediction_signal(h, self.sigma_signal)
+                self.judge.setdefault("signal_sigma", {})[f"other_recording_{k + 1}"] = signal
+                if signal >= THRESHOLD_SIGMA:
+                    self.judge["span"] = (f"other_recording_{k + 1}", span)
+                    break
+        return self.judge["span"]
+
+    def prediction_rms_sigma(self, m: ArticulatedModel, span: Recording) -> float:
+        """Noise-normalised RMS of ``m``'s prediction of ``span`` (pooled over joints)."""
+        h = predict_before_after(m, m, span, self.segment_s)
+        return float(np.sqrt(np.mean(((h.q_after - h.q_rec) / np.maximum(self.sigma_q, 1e-12)) ** 2)))
+
+    def prediction_gate(self, rows: list[dict]) -> dict | None:
+        """The first of ``rows`` (hypotheses with ΔBIC below DELTA_BIC whose effect on the fit is
+        above the noise but below the model-form floor) that predicts the judge recording better
+        than the current selection by more than MIN_EFFECT_SIZE_SIGMA noise sigmas, or None.
+        An effect the system has shows in every recording of it; polishing one recording's
+        model-form error does not carry over to another."""
+        js = self.judge_span()
+        if js is None:
+            return None
+        name, span = js
+        base = self.prediction_rms_sigma(self.model_of(self.current), span)
+        for r in rows:
+            self.say(f"predicting {span_words(name)} with {r['type']} on {r['joint']}")
+            new = self.prediction_rms_sigma(self.model_of(r["trial"]), span)
+            ok = base - new >= MIN_EFFECT_SIZE_SIGMA
+            self.tested.append({"prediction_gate": f"{r['type']} on {r['joint']}", "span": name,
+                                "prediction_rms_sigma": [base, new], "passed": ok})
+            if ok:
+                self.judge["used"] = True
+                return r
+        return None
+
+    # --- forward selection ------------------------------------------------------------------
+
+    def screened(self, pending: list[tuple[str, str]], keep: list[tuple[str, str]],
+                 strong_before: set[tuple[str, str]]) -> list[tuple[str, str]]:
+        """The hypotheses of ``pending`` (each added to ``keep``) that get an NLP fit: the
+        ``screen`` best of the linear pre-screen, plus those the previous round's NLP fits found
+        strong (the linear ranking is weak once an effect is in: its column absorbs what
+        collinear ones would explain)."""
+        if self.screen is None or len(pending) <= self.screen:
+            return pending
+        scores = screen_scores(self.model, pending, keep, self.r_nom, self.id_force, self.q_s, self.v_s, self.eps,
+                               self.v_scale, self.stops)
+        top = sorted(pending, key=lambda je: scores[je])[: self.screen]
+        return [je for je in pending if je in top or je in strong_before]
+
+    def select(self, max_effects: int) -> None:
+        """Forward selection by ΔBIC with an effect-size floor, the prediction gate for effects
+        below the model-form floor, a parent re-fit, then a stepwise revision (swaps, removals)
+        after each addition; at most ``max_effects`` effects."""
+        rounds = 0
+        strong_before: set[tuple[str, str]] = set()  # hypotheses the last round's fits found strong
+        while len(self.selected) < max_effects and rounds < max_effects + MAX_PARENT_REFITS:
+            rounds += 1
+            rss0 = self.rss(self.current)
+            pending = [(j, e) for j in self.model.joint_names for e in self.candidates
+                       if not any(s[:2] == (j, e) for s in self.selected)]
+            rows = self.fit_round(self.screened(pending, self.chosen(), strong_before))
+            if not rows:
+                break
+            n_eff = self.score_round(rows, rss0)
+            ok = [r for r in rows if r["supported"]]
+            strong = sorted((r for r in ok if r["delta_bic"] < DELTA_BIC), key=lambda r: r["delta_bic"])
+            # Below the model-form floor: strong evidence (ΔBIC) and a fit moved by more than the
+            # noise, but by less than the model-form error the round's best fit still leaves.  The
+            # fit span alone cannot tell such an effect from polishing that error; another
+            # recording of the system can (see ``prediction_gate``).
+            gated = sorted((r for r in rows if r["below_floor"] and r["delta_bic"] < DELTA_BIC),
+                           key=lambda r: r["delta_bic"])
+            strong_before = {(r["joint"], r["type"]) for r in strong}
+            if not strong and gated and self.other_recordings:
+                strong_before |= {(r["joint"], r["type"]) for r in gated}
+                passed = self.prediction_gate(gated[:PREDICTION_TRIES])
+                if passed is not None:
+                    strong = [{**passed, "supported": True}]
+                    self.gated_in.add((passed["joint"], passed["type"]))
+                    ok = ok + strong
+            if not strong:
+                break
+            best = self.unless_parent_fits_as_well(strong[0], rss0, n_eff)
+            if best is None:
+                continue
+            # Hypotheses that explain the data as well as the chosen one (log-likelihood within
+            # EQUIVALENT_LOGLIK on the same scale) are reported with it: the recording cannot tell them apart.
+            self.equivalents[(best["joint"], best["type"])] = [
+                {"joint": r["joint"], "type": r["type"], "trial": r["trial"]} for r in ok
+                if r is not best and abs(n_eff * np.log(r["rss"] / best["rss"])) < EQUIVALENT_LOGLIK]
+            self.current = best["trial"]
+            self.selected.append((best["joint"], best["type"], best["delta_bic"]))
+            self.say(f"selected {best['type']} on {best['joint']} (ΔBIC {best['delta_bic']:.0f})")
+            self.swap_earlier(strong_before)
+            self.drop_earlier()
+
+    def fit_round(self, pending: list[tuple[str, str]]) -> list[dict]:
+        """One row per hypothesis (the selection plus one of ``pending``): its fit, parameter
+        count, reported value, RSS, how far it moves the fit (in encoder noise sigmas) and whether
+        it converged off its "off" bound."""
+        rows = []
+        for joint, effect in pending:
+            self.say(f"testing {effect} on {joint}")
+            trial = self.trial_of(self.chosen() + [(joint, effect)], self.current)
+            names = effect_parameters(self.model, joint, effect)
+            # in units of the encoder noise of one recorded sample (not of the search grid's block
+            # means, whose noise is lower): whether an effect matters does not depend on the rate
+            size = float(np.sqrt(np.mean(((trial.q_fit - self.current.q_fit) / self.sigma_q) ** 2)))
+            supported = trial.success and not _at_bound_values(trial, names, self.nominal_z)
+            rows.append({"joint": joint, "type": effect, "trial": trial, "k": n_free_params(names),
+                         "value": _reported_value(self.model, joint, effect, trial.values),
+                         "rss": self.rss(trial), "effect_size_sigma": size, "supported": supported})
+        return rows
+
+    def score_round(self, rows: list[dict], rss0: float) -> float:
+        """Adds ΔBIC, "below_floor" and the effect-size test to each row (and records them in
+        ``tested``); returns the round's sample count for BIC."""
+        # One effective sample count for the whole round (so candidates compare on one scale):
+        # from the residuals of the round's best-fitting supported hypothesis.
+        pool = [r for r in rows if r["supported"]] or rows
+        best_fit = min(pool, key=lambda r: r["rss"])
+        n_eff = effective_count((best_fit["trial"].q_fit - self.srch.q) / self.sigma_s) if EFFECTIVE_N \
+            else float(self.n_res)
+        # An effect must move the fit by more than the noise, and by more than what the round's
+        # best hypothesis still leaves unexplained (the noise floor the data and library reach:
+        # the high-frequency noise estimate can be low).
+        floor = max(1.0, float(np.sqrt(np.mean(((best_fit["trial"].q_fit - self.srch.q) / self.sigma_q) ** 2))))
+        for r in rows:
+            r["below_floor"] = r["supported"] and MIN_EFFECT_SIZE_SIGMA <= r["effect_size_sigma"] < MIN_EFFECT_SIZE_SIGMA * floor
+            r["supported"] = r["supported"] and r["effect_size_sigma"] >= MIN_EFFECT_SIZE_SIGMA * floor
+            r["delta_bic"] = float(n_eff * np.log(r["rss"] / rss0) + r["k"] * np.log(n_eff))
+            self.tested.append({"joint": r["joint"], "type": r["type"], "value": r["value"], "delta_bic": r["delta_bic"],
+                                "effect_size_sigma": r["effect_size_sigma"], "supported": r["supported"],
+                                "iterations": r["trial"].iterations, "status": r["trial"].status, "n_eff": n_eff,
+                                "residual_floor_sigma": floor})
+        return n_eff
+
+    def unless_parent_fits_as_well(self, best: dict, rss0: float, n_eff: float) -> dict | None:
+        """``best`` (with its ΔBIC against a better parent fit if there is one), or None when the
+        round must run again.  The gain must be the new effect's, not a better optimum of the
+        effects already chosen that the new fit reached from its own start (dry friction makes the
+        fit multimodal): the parent hypothesis is re-fitted from the new fit's solution with the
+        new effect off.  If the parent then fits decisively better than the current fit, it
+        replaces it, and if the new effect's ΔBIC against it is no longer below DELTA_BIC, the
+        round is run again against it."""
+        parent = self.trial_of_parent(self.chosen(), best["trial"])
+        if not parent.success:
+            return best
+        rss_p = self.rss(parent)
+        if n_eff * np.log(rss_p / rss0) >= -EQUIVALENT_LOGLIK:
+            return best
+        d_new = float(n_eff * np.log(best["rss"] / rss_p) + best["k"] * np.log(n_eff))
+        self.tested.append({"parent_refit": [f"{e} on {j}" for j, e, _ in self.selected],
+                            "from": f"{best['type']} on {best['joint']}",
+                            "delta_bic_parent": float(n_eff * np.log(rss_p / rss0)), "delta_bic": d_new})
+        self.say(f"the chosen effects fit better from the {best['type']} fit's start; "
+                 f"{best['type']} then gains ΔBIC {d_new:.0f}")
+        self.current = parent
+        return None if d_new >= DELTA_BIC else {**best, "delta_bic": d_new}
+
+    def swap_earlier(self, strong_before: set[tuple[str, str]]) -> None:
+        """Stepwise revision: an effect chosen earlier, when a later one was still missing, may
+        have stood in for it (a stop for a spring); with the new effect in, replace an earlier one
+        by any other candidate whose set has lower BIC."""
+        model, n_res = self.model, self.n_res
+        for i in range(len(self.selected) - 1):
+            keep = [x[:2] for k, x in enumerate(self.selected) if k != i]
+            k_old = n_free_params(effect_parameters(model, *self.selected[i][:2]))
+            others = [(j, e) for j in model.joint_names for e in self.candidates
+                      if (j, e) not in keep and (j, e) != self.selected[i][:2]]
+            swaps = []
+            for joint, effect in self.screened(others, keep, strong_before):
+                self.say(f"testing {effect} on {joint} in place of {self.selected[i][1]}")
+                trial = self.trial_of(keep + [(joint, effect)], self.current)
+                names = effect_parameters(model, joint, effect)
+                if not trial.success or _at_bound_values(trial, names, self.nominal_z):
+                    continue
+                gain = n_res * np.log(self.rss(trial) / self.rss(self.current)) + (n_free_params(names) - k_old) * np.log(n_res)
+                if gain < DELTA_BIC:
+                    swaps.append((gain, joint, effect, trial))
+            swaps.sort(key=lambda x: x[0])
+            swap = self.gated_swap(i, swaps) if self.selected[i][:2] in self.gated_in else (swaps[0] if swaps else None)
+            if swap is not None:
+                gain, joint, effect, trial = swap
+                self.tested.append({"swap": f"{self.selected[i][1]} on {self.selected[i][0]} -> {effect} on {joint}",
+                                    "delta_bic": float(gain)})
+                self.say(f"replaced {self.selected[i][1]} on {self.selected[i][0]} by {effect} on {joint} (ΔBIC {gain:.0f})")
+                self.equivalents.pop(self.selected[i][:2], None)
+                self.selected[i] = (joint, effect, self.selected[i][2] + gain)
+                self.current = trial
+
+    def gated_swap(self, i: int, swaps: list[tuple]) -> tuple | None:
+        """An effect accepted for its prediction of another recording is replaced only by one of
+        ``swaps`` whose set predicts that recording at least as well (the fit span's ΔBIC cannot
+        tell polishing from physics here: that is why it was judged so)."""
+        if not swaps:
+            return None
+        name, span = self.judge_span()
+        base = self.prediction_rms_sigma(self.model_of(self.current), span)
+        for sw in swaps:
+            new = self.prediction_rms_sigma(self.model_of(sw[3]), span)
+            self.tested.append({"prediction_gate": f"{sw[2]} on {sw[1]} in place of {self.selected[i][1]} on "
+                                                   f"{self.selected[i][0]}",
+                                "span": name, "prediction_rms_sigma": [base, new], "passed": new <= base})
+            if new <= base:
+                self.gated_in.add((sw[1], sw[2]))
+                return sw
+        return None
+
+    def drop_earlier(self) -> None:
+        """Drop an earlier effect that no longer earns its place beside the others (its removal
+        must cost at least as much BIC as the entry threshold)."""
+        n_res = self.n_res
+        for i in range(len(self.selected) - 2, -1, -1):
+            keep = [x[:2] for k, x in enumerate(self.selected) if k != i]
+            self.say(f"testing the model without {self.selected[i][1]} on {self.selected[i][0]}")
+            trial = self.trial_of(keep, self.nominal_trial) if keep else self.nominal_trial
+            if keep and not trial.success:
+                continue
+            k_old = n_free_params(effect_parameters(self.model, *self.selected[i][:2]))
+            cost = n_res * np.log(self.rss(self.current) / self.rss(trial)) + k_old * np.log(n_res)  # BIC(with) - BIC(without)
+            if cost >= DELTA_BIC:
+                self.tested.append({"removed": f"{self.selected[i][1]} on {self.selected[i][0]}", "delta_bic": float(cost)})
+                self.say(f"removed {self.selected[i][1]} on {self.selected[i][0]} (ΔBIC of keeping it {cost:.0f})")
+                self.equivalents.pop(self.selected[i][:2], None)
+                del self.selected[i]
+                self.current = trial
+
+    # --- checks of the selection ------------------------------------------------------------
+
+    def drop_until_better(self, span: Recording, span_s: float | None, check: str, rms_key: str, doing: str,
+                          stage: str, first: HeldOut | None = None) -> None:
+        """Drop selected effects until the selection simulates ``span`` better than the nominal
+        model by MIN_EFFECT_SIZE_SIGMA noise sigmas or more (or none is left): backward
+        elimination, each step dropping the effect whose removal (the rest re-fitted) simulates
+        ``span`` best.  ``doing``: progress text, formatted with the number of effects ``n``;
+        ``stage``: the key of ``dropped`` the dropped effects are listed under; ``first``: the
+        current selection's prediction of ``span`` if already made."""
+        keys = self.chosen()
+        self.say(doing.format(n=len(self.selected)))
+        h = first or predict_before_after(self.nominal_model, self.model_of(self.current), span, span_s)
+        while True:
+            gain = h.gain_sigma(self.sigma_q)
+            self.tested.append({check: [f"{e} on {j}" for j, e, _ in self.selected], rms_key: [h.rms_before, h.rms_after],
+                                "gain_sigma": gain})
+            # better by more than the noise: a smaller gain is no evidence the selection explains the motion
+            if gain >= MIN_EFFECT_SIZE_SIGMA or not keys:
+                return
+            options = []  # (prediction, dropped effect, trial) per removal
+            for key in keys:
+                rest = [x[:2] for x in self.selected if x[:2] != key]
+                trial = self.trial_of(rest, self.nominal_trial) if rest else self.nominal_trial
+                self.say(f"simulating the fit span without {key[1]} on {key[0]}")
+                after = self.model_of(trial) if rest else self.nominal_model
+                options.append((predict_before_after(self.nominal_model, after, span, span_s), key, trial))
+            # a removal whose re-fit converged is preferred; one is made in any case
+            converged = [o for o in options if o[2].success] or options
+            h, (joint, effect), self.current = min(converged, key=lambda o: o[0].rms_after)
+            self.selected[:] = [x for x in self.selected if x[:2] != (joint, effect)]
+            keys.remove((joint, effect))
+            self.dropped.setdefault(stage, []).append(f"{effect} on {joint}")
+            self.say(f"dropped {effect} on {joint}: its simulation got no better")
+            self.equivalents.pop((joint, effect), None)
+            if not self.selected:
+                return
+
+    def simulation_check(self) -> None:
+        """The collocation fit lets states bend where the dynamics are soft, so a set of effects
+        can fit it without explaining the motion.  The selection must also simulate the fit span
+        better than the nominal model, by a noise sigma or more (in SIMULATION_CHECK_S pieces,
+        each from its own best state: open-loop replays of many seconds diverge for any model); if
+        it does not, effects are dropped (:meth:`drop_until_better`).  A limit contact is judged
+        like every other effect: the model holds its stop."""
+        self.drop_until_better(self.srch, self.segment_s or SIMULATION_CHECK_S, "simulation_check",
+                               "fit_span_simulated_rms", "simulating the fit span with {n} effect(s)", "simulation_check")
+
+    def acceptance_check(self, held: Recording | None) -> tuple[dict | None, bool]:
+        """(``Diagnosis.acceptance_check``, whether the held-out span judged it).
+
+        When even the selection's fit stays above the located-mismatch level (THRESHOLD_SIGMA),
+        the output error is dominated by model-form error the library cannot express, and its
+        likelihood is no longer evidence for specific effects: the selection must then also
+        predict data outside the fit better than the nominal model, else effects are dropped as
+        in the simulation check.  That data is the held-out span ``held`` if the nominal model's
+        prediction of it errs by more than THRESHOLD_SIGMA noise sigmas (else it shows nothing an
+        effect could predict better, e.g. a system come to rest), otherwise the first other
+        recording that does; the span used is then no longer independent (the summary and
+        diagnosis.json say which).  If no span carries such a signal the check is skipped, and
+        said so."""
+        floor_final = float(np.sqrt(self.rss(self.current) / self.n_res))
+        acceptance, judged_by_held_out = None, False
+        if self.selected and floor_final > THRESHOLD_SIGMA:
+            spans = ([("held_out", held)] if held is not None else []) + \
+                [(f"other_recording_{k + 1}", match_recording(self.model, o)) for k, o in enumerate(self.other_recordings)]
+            signal = {}
+            for name, span in spans:
+                self.say(f"checking whether the {span_words(name)} can judge the effects")
+                h = predict_before_after(self.nominal_model, self.model_of(self.current), span, self.segment_s)
+                signal[name] = prediction_signal(h, self.sigma_signal)
+                if signal[name] < THRESHOLD_SIGMA:
+                    continue
+                judged_by_held_out = name == "held_out"
+                acceptance = {"span": name, "signal_sigma": signal, "fit_rms_sigma": floor_final, "reason": (
+                    f"the fit stays {floor_final:.0f}x the noise whatever effect is added — model-form error the effect "
+                    f"library cannot express — so effects were accepted only if they also predicted the {span_words(name)} "
+                    f"better (its nominal prediction errs by {signal[name]:.0f} sigma): that span is not independent here")}
+                self.drop_until_better(span, self.segment_s, "acceptance_check", "prediction_rms",
+                                       f"checking {{n}} effect(s) on the {span_words(name)}", "acceptance_check", first=h)
+                break
+            else:
+                acceptance = {"span": None, "signal_sigma": signal, "fit_rms_sigma": floor_final, "reason": (
+                    f"the fit stays {floor_final:.0f}x the noise, but no span outside the fit ("
+                    + (", ".join(f"{span_words(n)}: nominal prediction error {x:.1f} sigma" for n, x in signal.items())
+                       or "none given") + f") errs by {THRESHOLD_SIGMA:g} sigma or more, so none can show an effect: "
+                    "the effects are judged by the fit span alone (ΔBIC, effect size, simulation check)")}
+        if self.judge.get("used"):
+            gate = self.judge["span"][0]
+            acceptance = {"span": None, "reason": "", **(acceptance or {}), "gate_span": gate,
+                          "gate_signal_sigma": self.judge.get("signal_sigma", {}), "gate_reason": (
+                              f"effects that moved the fit by more than the noise but less than the model-form error "
+                              f"were accepted only if they predicted {span_words(gate)} better by more than the "
+                              "noise: that recording is not independent here")}
+        return acceptance, judged_by_held_out
+
+    # --- the full-rate fits -----------------------------------------------------------------
+
+    def final_fits(self, fit_rec: Recording, k_dec: int) -> tuple[Calibration, Calibration]:
+        """(nominal, final) calibrations on the full-rate fit span ``fit_rec`` (search grid: block
+        means of ``k_dec`` samples).  An effect the model lacked whose 95 % interval still holds
+        its "off" value (zero force, unit inertia ratio, nominal axis; for a stop, every recorded
+        position) is not supported by the data, whatever the BIC of the search said (a fit can
+        gain from reaching another optimum of the other effects): it is dropped, the weakest
+        first, and the rest re-fitted."""
+        model, stops, segment_s, sigma_q, eps = self.model, self.stops, self.segment_s, self.sigma_q, self.eps
+        chosen = self.chosen()
+        if k_dec == 1:
+            nominal = _calibration(model, fit_rec, self.nominal_trial, [], stops, segment_s, sigma_q, eps)
+            final = _calibration(model, fit_rec, self.current, chosen, stops, segment_s, sigma_q, eps)
+        else:
+            # One fit at the full rate holding the selected effects: the nominal model (effects
+            # fixed out) and the selected model, each started from its search-grid solution.
+            full = HypothesisFit(model, fit_rec, chosen, segment_s, stops, CANDIDATE_MAX_ITER, sigma_q, eps)
+            t_s = self.fits["base"].t_grid
+            nominal_full = full.solve([], x0=full.states_from(t_s, self.nominal_trial.X))
+            names = [n for j, e in chosen for n in effect_parameters(model, j, e)]
+            final_full = full.solve(names, init={n: self.current.values[n] for n in names}, bounds=self.current.bounds,
+                                    x0=full.states_from(t_s, self.current.X)) if chosen else nominal_full
+            nominal = _calibration(model, fit_rec, nominal_full, [], stops, segment_s, sigma_q, eps)
+            final = _calibration(model, fit_rec, final_full, chosen, stops, segment_s, sigma_q, eps, fit=full.fit)
+
+        def motion_of(joint: str) -> tuple[float, float]:
+            q = fit_rec.q[:, model.joint_index(joint)]
+            return float(q.min()), float(q.max())
+
+        while True:
+            weak = [(i, w) for i, (j, e, _) in enumerate(self.selected)
+                    if (w := interval_holds_off(model, j, e, final, motion_of(j))) is not None]
+            if not weak:
+                return nominal, final
+            i = max(weak, key=lambda iw: iw[1])[0]
+            joint, effect, _ = self.selected.pop(i)
+            reason = _interval_words(model, joint, effect, final, motion_of(joint))
+            self.say(f"dropped {effect} on {joint}: {reason}")
+            self.tested.append({"interval_check": f"{effect} on {joint}", "dropped": True, "reason": reason})
+            self.dropped.setdefault("interval_check", []).append(f"{effect} on {joint}")
+            self.equivalents.pop((joint, effect), None)
+            chosen = self.chosen()
+            names = [n for j, e in chosen for n in effect_parameters(model, j, e)]
+            if k_dec == 1:
+                self.current = self.trial_of_parent(chosen, self.current) if chosen else self.nominal_trial
+                final = _calibration(model, fit_rec, self.current, chosen, stops, segment_s, sigma_q, eps)
+            else:
+                final_full = full.solve(names, start=final_full,
+                                        bounds={n: b for n, b in self.current.bounds.items() if n in names}) \
+                    if chosen else nominal_full
+                final = _calibration(model, fit_rec, final_full, chosen, stops, segment_s, sigma_q, eps)
+
+    def found_effects(self, final: Calibration) -> list[FoundEffect]:
+        """The selected effects as reported: value, unit, 95 % interval, ΔBIC and extra params
+        (spring rest, stop stiffness, Stribeck speed, tilted axis, equivalent explanations, and
+        the model's old value when it had the effect)."""
+        model, found = self.model, []
+        for joint, effect, d in self.selected:
+            names = effect_parameters(model, joint, effect)
+            e = final.estimates[names[0]]
+            params = {}
+            if effect == "spring":
+                params["rest"] = float(final.estimates[names[1]].value[0])
+            if effect == "limit_contact":
+                params["stiffness"] = float(final.estimates[names[1]].value[0])
+            if effect == "stribeck_friction":
+                params["v_stribeck"] = float(final.estimates[names[1]].value[0])
+            alts = self.equivalents.get((joint, effect), [])
+            if alts:
+                params["equivalent"] = [{"joint": a["joint"], "type": a["type"],
+                                         "value": _reported_value(model, a["joint"], a["type"], a["trial"].values)}
+                                        for a in alts]
+            if effect == "axis_tilt":
+                value = _reported_value(model, joint, effect, {names[0]: e.value})
+                params["axis_world"] = _axis_world(final.model, joint).tolist()
+                half = e.ci95_angle_rad or 0.0
+                found.append(FoundEffect(joint, effect, value, "rad", (max(value - half, 0.0), value + half), d, params))
+                continue
+            if _model_had(model, joint, effect, e):  # a correction of the value the model had
+                params["nominal"] = float(e.nominal[0])
+            found.append(FoundEffect(joint, effect, float(e.value[0]), e.unit, (float(e.ci95_low[0]), float(e.ci95_high[0])),
+                                     d, params))
+        return found
