@@ -306,9 +306,11 @@ def test_weakly_weighted_dynamics_leave_the_inertia_to_its_prior(pushed):
 
 
 def test_an_unconverged_full_stage_that_fits_the_points_as_well_is_kept():
-    """The door's mesh inertia is half the truth's.  Stopped after 20 iterations, the full stage
-    has found the inertia (ratio 2) while its visual term is within noise of the warm-up's: its
-    iterate is kept instead of the mesh's inertia."""
+    """The door's mesh inertia is half the truth's.  Stopped two iterations before it would
+    converge, the full stage has found the inertia (ratio 2) while its visual term is within noise
+    of the warm-up's: its iterate is kept instead of the mesh's inertia.  (The stop is set from
+    the converged solve's iteration count: a fixed count of 20 landed, with numpy 2.4 / scipy 1.17,
+    on an iterate whose visual term is still 0.8 above the warm-up's.)"""
     true = door_model(AXIS, ORIGIN, damping=0.5)
     init = door_model(TILT @ AXIS, ORIGIN + [0.01, -0.008, 0.0])
     inert = init.link("door").inertial
@@ -316,7 +318,10 @@ def test_an_unconverged_full_stage_that_fits_the_points_as_well_is_kept():
     t, q, _, w = pushed_trajectory(true, 1.5, 120, 0.5, 1.0)
     idx = np.arange(0, t.size, 12)
     data = exact_data(true, init, t[idx], q[idx], q[idx] + np.random.default_rng(1).normal(0, 0.02, idx.size), wrenches=w)
-    r = refine_screws(data, ScrewOptions(energy="soft", max_iter=20, reweight_dyn=False))
+    converged = refine_screws(data, ScrewOptions(energy="soft", reweight_dyn=False))
+    n = next(s for s in converged.stages if s["stage"] == "full")["iterations"]
+    assert n > 10, "the full stage converges too fast for this test to stop it early"
+    r = refine_screws(data, ScrewOptions(energy="soft", max_iter=n - 2, reweight_dyn=False))
     full = next(s for s in r.stages if s["stage"] == "full")
     assert not full["success"] and full["accepted"]
     assert r.state.inertia_ratio["door"] == pytest.approx(2.0, rel=0.05)
