@@ -35,7 +35,16 @@ verifies; re-detection may then put it on another face of the part (90° and ten
 step), which the images accept and from which tracking continues.  A pose is a *jump* when it lies
 farther than the wide coarse ICP radius (WIDE_FACTOR·ICP_COARSE_VOXELS voxels, the farthest ICP
 reaches from a prediction; RMS over the points) from the constant-velocity prediction of the poses
-before it (:func:`jump`).  When the next pose is back on the prediction from before, the jumped
+before it, or farther than the fragment's own RMS radius, or when it turns the fragment's surface
+normals by more than FACE_TURN (:func:`jump`, :func:`face_turned`).  The last two are for small
+fragments: a few hundred points of a flat face are no wider than ICP's wide reach, so a pass that
+lands them on a perpendicular face (a drawer's side-wall strip, hidden in the body once the drawer
+is pushed in fast, put on the drawer's front by the wide pass) moves them less than that reach,
+and a few degrees of tilt that their geometry cannot resolve, extrapolated along its screw, reach
+the turn; a fragment moved farther than its own size no longer covers its predicted place, and
+one whose normals turned by more than half a quarter turn faces a neighbouring face's way
+(a spin about its normal turns none: its surface cannot witness one).  When the next pose is back
+on the prediction from before, the jumped
 pose alone is unobserved (an outlier: a flat door flipped half a turn).  A jump is kept when it
 goes on along the screw of the increment before it (the same motion, faster or slower: a lid
 slammed shut; checked first) or when the next pose continues from it (a part that starts or stops moving between
@@ -120,6 +129,12 @@ COMOVING_SHARE = 0.8
 # Growing: rounds of CLUSTER_VOXELS each, and time steps compared per round.
 GROW_ROUNDS = 100
 GROW_STEPS = 10
+# Surface normals from this many nearest points of a fragment.
+NORMAL_NEIGHBOURS = 12
+# A fragment whose surface turns by more than this from a prediction faces another way: a box's
+# faces are a quarter turn apart, and past half that a surface faces nearer a neighbouring face's
+# way than its own [rad].
+FACE_TURN = np.pi / 4
 
 
 @dataclass(frozen=True, eq=False)
@@ -172,10 +187,29 @@ def _predict(poses: list[np.ndarray], ahead: int = 1) -> np.ndarray:
     return np.linalg.matrix_power(poses[-1] @ np.linalg.inv(poses[-2]), ahead) @ poses[-1]
 
 
-def _on_screw(before: list[np.ndarray], pose: np.ndarray, points: np.ndarray, tolerance: float) -> bool:
+def surface_normals(points: np.ndarray) -> np.ndarray:
+    """(N, 3) unit normals (sign arbitrary) of (N, 3) surface points [m]: the least principal axis
+    of each point's NORMAL_NEIGHBOURS nearest points."""
+    idx = cKDTree(points).query(points, k=min(NORMAL_NEIGHBOURS, len(points)))[1]
+    nb = points[idx] - points[idx].mean(axis=1, keepdims=True)
+    return np.linalg.svd(nb, full_matrices=False)[2][:, -1, :]
+
+
+def face_turned(A: np.ndarray, B: np.ndarray, normals: np.ndarray) -> bool:
+    """Whether the (4, 4) motions A and B turn a fragment's surface, its (N, 3) reference
+    ``normals``, to face ways more than FACE_TURN apart (median over the points): B puts it on
+    another face than A.  A turn about a normal (a flat patch spun in its own plane) turns no
+    normal: the surface cannot witness it."""
+    cos = np.abs(np.einsum("ij,ij->i", normals @ A[:3, :3].T, normals @ B[:3, :3].T))
+    return bool(np.median(cos) < np.cos(FACE_TURN))
+
+
+def _on_screw(before: list[np.ndarray], pose: np.ndarray, points: np.ndarray, normals: np.ndarray,
+              tolerance: float) -> bool:
     """Whether (4, 4) ``pose`` lies within ``tolerance`` [m] (:func:`displacement` of (N, 3)
-    ``points``) of the last of ``before`` moved further along the screw of the last increment,
-    by any amount up to a half-turn either way: the same motion at another speed."""
+    ``points``), on the same face (:func:`face_turned`, ``normals`` of the points), of the last of
+    ``before`` moved further along the screw of the last increment, by any amount up to a
+    half-turn either way: the same motion at another speed."""
     if len(before) < 2:
         return False
     xi = np.real(logm(before[-1] @ np.linalg.inv(before[-2])))  # the last increment's twist (4, 4)
@@ -183,28 +217,33 @@ def _on_screw(before: list[np.ndarray], pose: np.ndarray, points: np.ndarray, to
     bound = np.pi / turn if turn > 0 else 1.0
     res = minimize_scalar(lambda lam: displacement(pose, expm(lam * xi) @ before[-1], points),
                           bounds=(-bound, bound), method="bounded")
-    return bool(res.fun <= tolerance)
+    return bool(res.fun <= tolerance) and not face_turned(pose, expm(res.x * xi) @ before[-1], normals)
 
 
 def jump(before: list[np.ndarray], pose: np.ndarray, after: np.ndarray | None, points: np.ndarray,
          tolerance: float) -> str | None:
     """How the (4, 4) world motion ``pose`` of (N, 3) ``points`` sits between the solved poses
     ``before`` it (the last one or two, in tracking order) and the pose ``after`` it (None at the
-    end of the track; module doc): None when it lies within ``tolerance`` [m]
-    (:func:`displacement`) of the constant-velocity prediction from ``before`` or continues the
+    end of the track; module doc).  Two poses are *near* when they lie within ``tolerance`` [m]
+    (:func:`displacement`) and on the same face (:func:`face_turned`, on the points' surface
+    normals).  None when ``pose`` is near the constant-velocity prediction from ``before`` or continues the
     last increment's screw (:func:`_on_screw`: the same motion, faster or slower); "outlier" when
-    ``after`` is back within ``tolerance`` of where the tracker's two motion hypotheses put it
+    ``after`` is back near where the tracker's two motion hypotheses put it
     from ``before`` — constant velocity two steps ahead, or at rest at the last of ``before`` (a
     lid slammed shut stops there) — so ``pose`` alone is wrong (a one-step spike); None when
-    ``after`` continues from ``pose`` within ``tolerance`` (a velocity change, once); else "slip".
+    ``after`` is near the continuation from ``pose`` (a velocity change, once); else "slip".
     The outlier test comes first: a flat part registered turned over at every other step has a
     constant half-turn "velocity" that every next pose continues."""
-    if displacement(pose, _predict(before), points) <= tolerance or _on_screw(before, pose, points, tolerance):
+    normals = surface_normals(points)
+
+    def near(A: np.ndarray, B: np.ndarray) -> bool:
+        return displacement(A, B, points) <= tolerance and not face_turned(A, B, normals)
+
+    if near(pose, _predict(before)) or _on_screw(before, pose, points, normals, tolerance):
         return None
-    if after is not None and min(displacement(after, _predict(before, 2), points),
-                                 displacement(after, before[-1], points)) <= tolerance:
+    if after is not None and (near(after, _predict(before, 2)) or near(after, before[-1])):
         return "outlier"
-    if after is not None and displacement(after, _predict([before[-1], pose]), points) <= tolerance:
+    if after is not None and near(after, _predict([before[-1], pose])):
         return None
     return "slip"
 
@@ -418,7 +457,10 @@ class Tracker:
         sample = tracking_subset(points)
         Ts = np.full((n, 4, 4), np.nan)
         Ts[ref] = np.eye(4)
-        reach = WIDE_FACTOR * ICP_COARSE_VOXELS * self.voxel
+        # a pose farther than ICP reaches from a prediction is a jump, and so is one farther than
+        # the fragment's own size: it no longer covers its place at the prediction (module doc)
+        radius = np.sqrt(np.mean(np.sum((sample - sample.mean(axis=0)) ** 2, axis=1)))
+        reach = min(WIDE_FACTOR * ICP_COARSE_VOXELS * self.voxel, radius)
         # a symmetric part registers turned over as well as not (a flat lid at rest): of a pose
         # and its symmetric twins, the one nearest a guess (constant velocity, or at rest) is kept
         twins = [np.eye(4)] + symmetries(sample, ICP_FINE_VOXELS * self.voxel)
