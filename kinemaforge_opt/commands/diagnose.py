@@ -8,9 +8,9 @@ import argparse
 EPILOG = """\
 what it does:
   1. fits the nominal model and locates the residual (joint, time windows, state regions);
-  2. tests the effect library (viscous_damping, coulomb_friction, stribeck_friction, spring,
-     constant_bias, quadratic_drag, axis_tilt, inertia_error) as competing hypotheses and keeps
-     those with ΔBIC < -10 that move the fit by more than the noise;
+  2. tests the effect library (viscous_damping, coulomb_friction, spring, constant_bias,
+     quadratic_drag, stribeck_friction, axis_tilt, inertia_error, limit_contact) as competing
+     hypotheses and keeps those with ΔBIC < -10 that move the fit by more than the noise;
   3. re-fits with them and writes the augmented model;
   4. compares nominal vs augmented on the held-out last part of the recording and in Drake.
   When the fit stays far above the noise with any effect (model-form error the library cannot

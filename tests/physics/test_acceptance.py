@@ -97,3 +97,15 @@ def test_quantisation_sigma_is_the_encoder_step_over_root_twelve():
     s = quantisation_sigma(q)
     assert s[0] == pytest.approx(step / np.sqrt(12), rel=1e-6)
     assert s[1] < 1e-3 * step  # an unquantised signal has no rounding floor
+
+
+def test_diagnose_help_names_every_candidate_effect_and_the_threshold():
+    """`kinemaforge diagnose --help` lists the effect library the search tests and its ΔBIC
+    threshold (the help text is written out, so that the command starts without importing the
+    solvers; this keeps it true)."""
+    from kinemaforge_opt.commands.diagnose import EPILOG
+    from kinemaforge_opt.physics.selection import CANDIDATES, DELTA_BIC
+
+    library = EPILOG.split("tests the effect library (", 1)[1].split(")", 1)[0]
+    assert [name.strip() for name in library.replace("\n", " ").split(",")] == list(CANDIDATES)
+    assert f"ΔBIC < {DELTA_BIC:g}" in EPILOG
