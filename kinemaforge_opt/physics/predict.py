@@ -21,9 +21,7 @@ STATE_WINDOW_S = 0.3
 # far below the encoder noise; the starting state's least-squares fit differentiates them with
 # this fixed step in its scaled variables (q [rad or m], v × window [rad or m]).
 SIM_RTOL, SIM_ATOL = 1e-5, 1e-7
-
 STATE_FIT_STEP = 1e-4
-
 # ... and stops once an iteration changes its squared error or its scaled state by less than this
 # fraction (a 0.01 % change of the error is far below anything a prediction is judged by;
 # MINPACK's default, 1e-8, spent about twice the integrations on digits below the noise).
