@@ -20,9 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics.diagnose import before_nominal_stops
-from ..physics.search import effect_parameters
+from ..physics.search import HypothesisFit, effect_parameters
 from ..physics.selection import n_free_params, rss_q
-from ..physics.search import HypothesisFit
 from ..nlp.joint_space import friction_smoothing, match_recording, noise_std
 from ..synth.effects import ConcealedEffect, tilted_axis
 from .recordings import EffectRecording

@@ -221,7 +221,7 @@ def _on_screw(before: list[np.ndarray], pose: np.ndarray, points: np.ndarray, no
 
 
 def jump(before: list[np.ndarray], pose: np.ndarray, after: np.ndarray | None, points: np.ndarray,
-         tolerance: float) -> str | None:
+         tolerance: float, normals: np.ndarray | None = None) -> str | None:
     """How the (4, 4) world motion ``pose`` of (N, 3) ``points`` sits between the solved poses
     ``before`` it (the last one or two, in tracking order) and the pose ``after`` it (None at the
     end of the track; module doc).  Two poses are *near* when they lie within ``tolerance`` [m]
@@ -233,8 +233,9 @@ def jump(before: list[np.ndarray], pose: np.ndarray, after: np.ndarray | None, p
     lid slammed shut stops there) — so ``pose`` alone is wrong (a one-step spike); None when
     ``after`` is near the continuation from ``pose`` (a velocity change, once); else "slip".
     The outlier test comes first: a flat part registered turned over at every other step has a
-    constant half-turn "velocity" that every next pose continues."""
-    normals = surface_normals(points)
+    constant half-turn "velocity" that every next pose continues.  normals: the points'
+    :func:`surface_normals`, if already computed (a track judges every step on the same points)."""
+    normals = surface_normals(points) if normals is None else normals
 
     def near(A: np.ndarray, B: np.ndarray) -> bool:
         return displacement(A, B, points) <= tolerance and not face_turned(A, B, normals)
@@ -461,6 +462,7 @@ class Tracker:
         # the fragment's own size: it no longer covers its place at the prediction (module doc)
         radius = np.sqrt(np.mean(np.sum((sample - sample.mean(axis=0)) ** 2, axis=1)))
         reach = min(WIDE_FACTOR * ICP_COARSE_VOXELS * self.voxel, radius)
+        normals = surface_normals(sample)
         # a symmetric part registers turned over as well as not (a flat lid at rest): of a pose
         # and its symmetric twins, the one nearest a guess (constant velocity, or at rest) is kept
         twins = [np.eye(4)] + symmetries(sample, ICP_FINE_VOXELS * self.voxel)
@@ -485,7 +487,7 @@ class Tracker:
                 steps.append(s - direction)
                 if len(solved) < 3 or (len(solved) == 3 and not sides):
                     continue
-                kind = jump((lead + solved)[-4:-2], solved[-2], T, sample, reach)
+                kind = jump((lead + solved)[-4:-2], solved[-2], T, sample, reach, normals)
                 if kind == "outlier":  # the jumped pose alone
                     Ts[steps[-2]] = np.nan
                     del solved[-2], steps[-2]
@@ -493,12 +495,14 @@ class Tracker:
                     Ts[steps[-2]] = Ts[steps[-1]] = np.nan
                     del solved[-2:], steps[-2:]
                     break
-            if len(solved) >= (2 if sides else 3) and jump((lead + solved)[-3:-1], solved[-1], None, sample, reach) == "slip":
+            if len(solved) >= (2 if sides else 3) and \
+                    jump((lead + solved)[-3:-1], solved[-1], None, sample, reach, normals) == "slip":
                 Ts[steps[-1]] = np.nan  # a jump at the last solved step, on no screw of the track
             sides.append((solved, steps))
         (solved, steps), other = sides[0], sides[1][0]
         if len(solved) >= 2:  # the first side's first step, after the increment on the other side
-            kind = jump(other[1:2][::-1] + [np.eye(4)], solved[1], solved[2] if len(solved) > 2 else None, sample, reach)
+            kind = jump(other[1:2][::-1] + [np.eye(4)], solved[1], solved[2] if len(solved) > 2 else None, sample, reach,
+                        normals)
             if kind == "outlier":
                 Ts[steps[1]] = np.nan
             elif kind == "slip":
