@@ -499,19 +499,25 @@ def stop_spans(times: np.ndarray, q: np.ndarray) -> list[tuple[int, int]]:
             b = i  # the stay at that end
             while b + 1 < T and abs(q[b + 1, k] - end) <= tol:
                 b += 1
-            if _impact(s[:, k], drop[:, k], i):
+            if _impact(s[:, k], drop[:, k], i, leaves=b + 1 < T):
                 spans.append((i - 1, min(b + 1, T - 1)))
             i = b + 1
     return sorted(spans)
 
 
-def _impact(s: np.ndarray, drop: np.ndarray, i: int) -> bool:
+def _impact(s: np.ndarray, drop: np.ndarray, i: int, leaves: bool) -> bool:
     """Whether a joint's arrival at an end of its range at frame i (≥ 2) is a stop impact, from its
-    frame-step speeds s (T-1,) and speed drops (T-2,) (:data:`STOP_DROP`)."""
+    frame-step speeds s (T-1,) and speed drops (T-2,) (:data:`STOP_DROP`).  ``leaves``: the joint
+    leaves that end again later.  A joint that arrives fast, leaves slower than STOP_REST × that
+    speed and does leave was sent back by a stop (gravity and springs send it back as fast as it
+    came) or by a hand (its span only leaves data out), so the drop need not show: a hand that
+    braked it before the end hides it (protocol_drawer_1@s1's drawer, braked to 0.11 m/s,
+    rebounds at 0.015 m/s)."""
     arrive = s[i - 2:i].max()
+    if not (arrive > STOP_MIN_SPEED * s.max() and s[i:i + 2].max() < STOP_REST * arrive):
+        return False
     prior = min(float(np.median(drop[max(i - 4 - d, 0):i - 1 - d])) for d in (0, 1) if i - 1 - d > 0)
-    return bool(arrive > STOP_MIN_SPEED * s.max() and s[i:i + 2].max() < STOP_REST * arrive
-                and drop[i - 2:i].max() > STOP_DROP * prior)
+    return bool(leaves or drop[i - 2:i].max() > STOP_DROP * prior)
 
 
 def stop_free(times: np.ndarray, q: np.ndarray, t_grid: np.ndarray) -> np.ndarray:
@@ -972,8 +978,10 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     solve with the correspondences of the closed form.  A stage that does not converge is
     recorded (``success`` False, IPOPT's status kept); its last iterate is kept (``accepted``)
     only if its robust visual term is no worse than before the stage (within :data:`VIS_SLACK`),
-    else the next stage starts from the previous state.  The re-weighted full solve is kept only
-    when it converges."""
+    else it is continued once from that iterate (``<stage>_continued``: protocol_drawer_1@s1's
+    full stage stopped at 200 iterations and converged 115 later) and judged the same way, and
+    if refused again the next stage starts from the previous state.  The re-weighted full solve
+    is kept only when it converges."""
     options = options or ScrewOptions()
     start = time.perf_counter()
     state = initial_state(data)
@@ -986,24 +994,36 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         raise KinemaforgeError("the screw NLP has nothing to fit: 'vis' is off and 'dyn' has no recorded forces")
     opts = dataclasses.replace(options, dyn=want_dense)
 
-    def run(name, corr, dense, held=frozenset(), converged_only=False):
+    def run(name, corr, dense, held=frozenset(), converged_only=False, start=None):
+        """Solve a stage from ``start`` (default: the current state); returns (problem, result,
+        the unaccepted last iterate or None)."""
         nonlocal state
         t0 = time.perf_counter()
-        sp = build_screw_problem(data, opts, state, corr, dense, held)
+        sp = build_screw_problem(data, opts, start or state, corr, dense, held)
         res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn, sp.hess_lag))
-        accepted = False
+        accepted, iterate = False, None
         if np.isfinite(res.objective) and _physical(data, candidate := read_solution(sp, res)):
             # an unconverged iterate is kept only if it fits the observed points no worse (VIS_SLACK)
             accepted = res.success or (not converged_only and (
                 not corr or vis_value(data, candidate, corr) <= vis_value(data, state, corr) + VIS_SLACK))
             if accepted:
                 state = candidate
+            else:
+                iterate = candidate
         stages.append({"stage": name, "iterations": res.iterations, "success": res.success, "status": res.status,
                        "accepted": accepted,
                        "time_s": time.perf_counter() - t0, "solve_s": res.solve_time_s,
                        "eval_s": {k: round(float(v), 3) for k, v in res.stats.items() if k.startswith("t_wall_nlp")},
                        "costs": res.costs, "violations": res.violations, "n_vis": sp.n_vis,
                        "variables": sp.problem.sizes["variables"]})
+        return sp, res, iterate
+
+    def run_dense(name, corr, held=frozenset(), converged_only=False):
+        """A dense stage; stopped at max_iter on an iterate that fits the points worse than the
+        state before, it is continued once from that iterate (IPOPT's barrier restarts there)."""
+        sp, res, iterate = run(name, corr, True, held, converged_only)
+        if iterate is not None and not res.success and not converged_only:
+            sp, res, _ = run(f"{name}_continued", corr, True, held, start=iterate)
         return sp, res
 
     if options.coarse_to_fine and options.vis:
@@ -1035,12 +1055,12 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         corr = correspondences(data, state, size, plane_gate=plane_gate)
     else:
         corr = correspondences(data, state, size) if options.vis else None
-    sp, res = run("full", corr, dense=True)
+    sp, res = run_dense("full", corr)
     if options.reweight_dyn and options.energy != "hard" and sp.defects is not None and stages[-1]["accepted"]:
         opts = dataclasses.replace(opts, dyn_row_sigma=process_noise_scales(sp, res))
         # a refinement of a converged fit: its unconverged iterate may fit the points as well while
         # its dynamics are anywhere (seen: a door's mass ×22 at max_iter), so only a converged one counts
-        sp_rw, res_rw = run("full_reweighted", corr, dense=True, converged_only=True)
+        sp_rw, res_rw = run_dense("full_reweighted", corr, converged_only=True)
         if stages[-1]["accepted"]:
             sp, res = sp_rw, res_rw
             notes.append("dyn: defect scales re-estimated from the full fit: q̇ = v {:.3g}, v̇ {:.3g} (prior {:.3g})"
@@ -1051,7 +1071,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         # joint friction the recording cannot determine keeps its nominal value; the rest is re-fitted
         state = _nominal_friction(state, data.model, unsupported)
         notes.append("dyn: not identified, kept at the nominal value: " + ", ".join(sorted(unsupported)))
-        sp_refit, res_refit = run("full_refit", corr, dense=True, held=frozenset(unsupported))
+        sp_refit, res_refit = run_dense("full_refit", corr, held=frozenset(unsupported))
         if stages[-1]["accepted"]:  # else the full stage's fit stands, its unsupported friction nominal
             sp, res = sp_refit, res_refit
             refit = _identifiability(sp, res)

@@ -326,3 +326,27 @@ def test_an_unconverged_full_stage_that_fits_the_points_as_well_is_kept():
     assert not full["success"] and full["accepted"]
     assert r.state.inertia_ratio["door"] == pytest.approx(2.0, rel=0.05)
     assert r.state.mass_ratio["door"] == pytest.approx(2.0, rel=0.05)
+
+
+def test_an_unconverged_full_stage_that_is_refused_is_continued_from_its_iterate(monkeypatch):
+    """With the visual slack at -inf every unconverged iterate is refused.  The full stage,
+    stopped a little past half of the iterations its converged solve takes, is continued once
+    from its last iterate: that continuation converges and finds the true inertia (twice the
+    mesh's); without it the fit would fall back to the warm-up's (the mesh's)."""
+    from kinemaforge_opt.nlp import reconstruction as reco
+
+    true = door_model(AXIS, ORIGIN, damping=0.5)
+    init = door_model(TILT @ AXIS, ORIGIN + [0.01, -0.008, 0.0])
+    inert = init.link("door").inertial
+    init = init.with_link("door", inertial=dataclasses.replace(inert, mass=inert.mass / 2, inertia=inert.inertia / 2))
+    t, q, _, w = pushed_trajectory(true, 1.5, 120, 0.5, 1.0)
+    idx = np.arange(0, t.size, 12)
+    data = exact_data(true, init, t[idx], q[idx], q[idx] + np.random.default_rng(1).normal(0, 0.02, idx.size), wrenches=w)
+    options = ScrewOptions(energy="soft", reweight_dyn=False)
+    n = next(s for s in refine_screws(data, options).stages if s["stage"] == "full")["iterations"]
+    monkeypatch.setattr(reco, "VIS_SLACK", -np.inf)
+    r = refine_screws(data, dataclasses.replace(options, max_iter=n // 2 + 5))
+    stages = {s["stage"]: s for s in r.stages}
+    assert not stages["full"]["success"] and not stages["full"]["accepted"]
+    assert stages["full_continued"]["success"] and stages["full_continued"]["accepted"]
+    assert r.state.inertia_ratio["door"] == pytest.approx(2.0, rel=0.05)

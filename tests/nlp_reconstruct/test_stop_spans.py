@@ -89,3 +89,24 @@ def test_two_doors_each_hitting_its_stop_leave_the_time_between_the_impacts_in()
     free = stop_free(t, np.column_stack([qa, qb]), grid)
     mid = (grid[:-1] + grid[1:]) / 2
     assert free[mid < t[a0]].all() and not free[mid > t[a1]].any()
+
+
+@pytest.mark.parametrize("dt", [0.4, 0.475])
+def test_a_drawer_braked_before_its_stop_that_rebounds_slowly_is_an_impact(dt):
+    """A drawer pulled to 0.3 m/s, braked by the hand to 0.11 m/s by 0.85 s, coasts into its open
+    stop at 0.2425 m (at 1.7 s) and rebounds at 0.015 m/s (closed form).  At these frame rates
+    its speed fell before the stop by about as much as at it, so the drop does not single out
+    the impact; turning at the end of its range and leaving it slower than it came does.  The
+    span holds the impact."""
+    t = np.arange(0.0, 9.0 + 1e-9, dt)
+    tf = np.linspace(0.0, 9.0, 90001)
+    a = np.where(tf < 0.45, 0.3 / 0.45, np.where(tf < 0.85, -(0.3 - 0.11) / 0.4, 0.0))
+    v = np.concatenate([[0.0], np.cumsum((a[1:] + a[:-1]) / 2 * np.diff(tf))])
+    x = np.concatenate([[0.0], np.cumsum((v[1:] + v[:-1]) / 2 * np.diff(tf))])
+    hit = int(np.argmax(x >= 0.2425))
+    x[hit:] = 0.2425 - 0.015 * (tf[hit:] - tf[hit])
+    q = np.interp(t, tf, x)[:, None]
+    spans = stop_spans(t, q)
+    assert len(spans) == 1
+    a0, b0 = spans[0]
+    assert t[a0] <= tf[hit] <= t[b0]
