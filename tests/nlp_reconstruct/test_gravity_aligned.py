@@ -1,0 +1,99 @@
+"""Gravity-aligned axes (nlp.gravity_aligned): the plumb/level hypothesis and its BIC choice in the
+screw NLP, against doors whose true axes are known."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from kinemaforge_opt.nlp.gravity_aligned import alignment, constraint_rows, prefer_aligned, project
+from kinemaforge_opt.nlp.reconstruction import ScrewData, ScrewOptions, refine_screws
+from kinemaforge_opt.nlp.visual import SurfaceModel
+from kinemaforge_opt.spatial import axis_angle_error, exp_so3, make_transform, normalize
+
+from .worlds import door_model, door_surface_world, moved
+
+ORIGIN = np.array([0.3, 0.2, 0.1])
+
+
+def _tilted(deg: float, about=(1.0, 0.0, 0.0), axis=(0.0, 0.0, 1.0)) -> np.ndarray:
+    return exp_so3(normalize(np.asarray(about, float)) * np.radians(deg)) @ np.asarray(axis, float)
+
+
+def test_axes_near_plumb_or_level_are_named_and_others_are_not():
+    model = door_model([0, 0, 1], ORIGIN)
+    assert alignment(model, "hinge", _tilted(2.0)) == "plumb"
+    assert alignment(model, "hinge", _tilted(89.0)) == "level"
+    assert alignment(model, "hinge", _tilted(20.0)) is None
+    assert alignment(model, "hinge", _tilted(4.0)) is None
+
+
+def test_constraint_rows_follow_the_joint_frame_and_projection_is_the_nearest_aligned_axis():
+    # the joint frame turned 90° about x: the world's up is the joint frame's -y
+    model = door_model([0, 0, 1], ORIGIN)
+    j = model.joint("hinge")
+    model = model.with_joint("hinge", T_parent_joint=make_transform(exp_so3(np.array([np.pi / 2, 0, 0])), j.T_parent_joint[:3, 3]))
+    up_joint = np.array([0.0, -1.0, 0.0])
+    level = constraint_rows(model, "hinge", "level")
+    np.testing.assert_allclose(np.abs(level), [[0, 1, 0]], atol=1e-12)
+    plumb = constraint_rows(model, "hinge", "plumb")
+    np.testing.assert_allclose(plumb @ up_joint, 0.0, atol=1e-12)
+    a = normalize([0.1, -1.0, 0.05])
+    np.testing.assert_allclose(project(a, plumb), up_joint, atol=1e-12)
+    b = normalize([1.0, 0.03, 0.2])
+    np.testing.assert_allclose(project(b, level), normalize([1.0, 0.0, 0.2]), atol=1e-12)
+
+
+def test_bic_keeps_the_aligned_fit_within_its_parameter_penalty():
+    n = 1000  # 2 n ΔJ against k ln n = 6.9 per parameter
+    assert prefer_aligned(1.0, 1.0 + 6.0 / (2 * n), n, 1)
+    assert not prefer_aligned(1.0, 1.0 + 8.0 / (2 * n), n, 1)
+    assert prefer_aligned(1.0, 1.0 + 8.0 / (2 * n), n, 2)
+
+
+def _door_data(axis_world: np.ndarray, sigma: float = 0.003, seed: int = 0):
+    """A door on ``axis_world`` opening to 1.4 rad over 8 frames, 400 observed points per frame
+    with Gaussian noise ``sigma`` [m]; the closed form 2° off the truth.  Returns (true, data)."""
+    true = door_model(axis_world, ORIGIN)
+    init = door_model(exp_so3(normalize([1.0, 1.0, 0.0]) * np.radians(2.0)) @ axis_world, ORIGIN + [0.01, -0.008, 0.0])
+    times = np.linspace(0.0, 2.0, 8)
+    q = 1.4 * np.sin(0.7 * times)
+    rng = np.random.default_rng(seed)
+    S, N = door_surface_world(true, 0.01)
+    fine, _ = door_surface_world(true, 0.01 / 2.3)
+    obs = [moved(true, qk, fine[rng.choice(len(fine), 400, replace=False)])[0] + rng.normal(0, sigma, (400, 3)) for qk in q]
+    data = ScrewData(init, times, (q + rng.normal(0, 0.03, q.size))[:, None], {"door": obs},
+                     {"door": SurfaceModel("door", S, N)}, delta=sigma, gate=0.05)
+    return true, data
+
+
+def _axis_error_deg(model, true) -> float:
+    return float(np.degrees(axis_angle_error(model.joint("hinge").axis, true.joint("hinge").axis)))
+
+
+def test_a_plumb_door_fitted_from_noisy_points_comes_out_exactly_plumb():
+    true, data = _door_data(np.array([0.0, 0.0, 1.0]))
+    free = refine_screws(data, ScrewOptions(dyn=False, gravity_aligned=False))
+    aligned = refine_screws(data, ScrewOptions(dyn=False))
+    assert _axis_error_deg(free.model, true) > 1e-3  # the noise leaves the free fit off plumb
+    assert _axis_error_deg(aligned.model, true) < 1e-6
+    assert any(n.startswith("axes: hinge plumb") and n.endswith("kept") for n in aligned.notes)
+    assert [s["stage"] for s in aligned.stages][-1] == "gravity_aligned"
+
+
+@pytest.mark.parametrize("tilt_deg", [1.0, 2.0])
+def test_a_door_tilted_by_a_degree_or_two_keeps_its_tilt(tilt_deg):
+    axis = _tilted(tilt_deg, about=(1.0, 1.0, 0.0))
+    true, data = _door_data(axis)
+    r = refine_screws(data, ScrewOptions(dyn=False))
+    assert any(n.startswith("axes: hinge plumb") and n.endswith("refused") for n in r.notes)
+    assert _axis_error_deg(r.model, true) < 0.1
+
+
+def test_switching_it_off_leaves_no_trace():
+    _, data = _door_data(np.array([0.0, 0.0, 1.0]))
+    r = refine_screws(data, dataclasses.replace(ScrewOptions(dyn=False), gravity_aligned=False))
+    assert "gravity_aligned" not in [s["stage"] for s in r.stages]
+    assert not any(n.startswith("axes:") for n in r.notes)
