@@ -53,7 +53,7 @@ import scipy.signal
 
 from ..arm.idim import base_columns
 from ..calibration import _UNITS, Calibration, Estimate, apply_parameters
-from ..errors import DataError, KinemaforgeError, UnknownNameError
+from ..errors import DataError, UnknownNameError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..physics.effects import EFFECTS

@@ -647,14 +647,13 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         fixed_states[:n, between] = True
         lower[fixed_states] = upper[fixed_states] = x_init[fixed_states]
         X = prob.variable("x", (2 * n, G), init=np.vstack([q0.T, v0.T]), lower=lower, upper=upper)
-        Q, V = X[:n, :], X[n:, :]
+        Q = X[:n, :]
     else:
         lower = upper = None
         if not options.vis:  # nothing observes q: hold the closed-form values
             lower = upper = q0.T
         Q = prob.variable("q", (n, G), init=q0.T, lower=-np.inf if lower is None else lower,
                           upper=np.inf if upper is None else upper)
-        V = None
     terms = {}
     n_vis = 0
     vis_blocks = []  # (per-step Function, frame columns, H blocks) for the structured Hessian
