@@ -9,11 +9,10 @@ import numpy as np
 import pytest
 
 from kinemaforge_opt.nlp.gravity_aligned import alignment, constraint_rows, prefer_aligned, project
-from kinemaforge_opt.nlp.reconstruction import ScrewData, ScrewOptions, refine_screws
-from kinemaforge_opt.nlp.visual import SurfaceModel
+from kinemaforge_opt.nlp.reconstruction import ScrewOptions, refine_screws
 from kinemaforge_opt.spatial import axis_angle_error, exp_so3, make_transform, normalize
 
-from .worlds import door_model, door_surface_world, moved
+from .worlds import door_model, noisy_door_data
 
 ORIGIN = np.array([0.3, 0.2, 0.1])
 
@@ -53,20 +52,12 @@ def test_bic_keeps_the_aligned_fit_within_its_parameter_penalty():
     assert prefer_aligned(1.0, 1.0 + 8.0 / (2 * n), n, 2)
 
 
-def _door_data(axis_world: np.ndarray, sigma: float = 0.003, seed: int = 0):
-    """A door on ``axis_world`` opening to 1.4 rad over 8 frames, 400 observed points per frame
-    with Gaussian noise ``sigma`` [m]; the closed form 2° off the truth.  Returns (true, data)."""
+def _door_data(axis_world: np.ndarray, sigma: float = 0.003):
+    """:func:`noisy_door_data` of a door on ``axis_world``, the closed form 2° off the truth.
+    Returns (true, data)."""
     true = door_model(axis_world, ORIGIN)
     init = door_model(exp_so3(normalize([1.0, 1.0, 0.0]) * np.radians(2.0)) @ axis_world, ORIGIN + [0.01, -0.008, 0.0])
-    times = np.linspace(0.0, 2.0, 8)
-    q = 1.4 * np.sin(0.7 * times)
-    rng = np.random.default_rng(seed)
-    S, N = door_surface_world(true, 0.01)
-    fine, _ = door_surface_world(true, 0.01 / 2.3)
-    obs = [moved(true, qk, fine[rng.choice(len(fine), 400, replace=False)])[0] + rng.normal(0, sigma, (400, 3)) for qk in q]
-    data = ScrewData(init, times, (q + rng.normal(0, 0.03, q.size))[:, None], {"door": obs},
-                     {"door": SurfaceModel("door", S, N)}, delta=sigma, gate=0.05)
-    return true, data
+    return true, noisy_door_data(true, init, sigma, delta=sigma)[0]
 
 
 def _axis_error_deg(model, true) -> float:

@@ -22,10 +22,10 @@ from kinemaforge_opt.nlp.reconstruction import (
     state_model,
     transforms_world0_t,
 )
-from kinemaforge_opt.nlp.visual import SurfaceModel, linear_rows, point_to_plane, z_vector
+from kinemaforge_opt.nlp.visual import linear_rows, point_to_plane, z_vector
 from kinemaforge_opt.spatial import axis_angle_error, exp_so3, line_distance, make_transform, normalize
 
-from .worlds import door_model, door_surface_world, exact_data, moved, pushed_trajectory
+from .worlds import door_model, exact_data, noisy_door_data, pushed_trajectory
 
 # The push stops abruptly at 0.5 s: collocation steps of 1/30 s resolve it (at the default 0.1 s the
 # discretisation error of the dynamics biases the axis by ~0.13° on this door).
@@ -85,20 +85,11 @@ def test_vis_recovers_the_exact_axis_from_a_3_degree_error():
 
 
 def _noisy_door(surface_faces, sigma: float, seed: int = 0):
-    """The door opening to 1.4 rad over 8 frames; 400 observed points per frame from every face,
-    with isotropic Gaussian noise ``sigma`` [m]; the surface model holds the faces where
-    ``surface_faces(normals)`` is True.  Returns (true model, ScrewData, true q)."""
+    """:func:`noisy_door_data` of the door on AXIS, the closed form off by TILT and ~1 cm.
+    Returns (true model, ScrewData, true q)."""
     true = door_model(AXIS, ORIGIN)
     init = door_model(TILT @ AXIS, ORIGIN + [0.01, -0.008, 0.0])
-    times = np.linspace(0.0, 2.0, 8)
-    q = 1.4 * np.sin(0.7 * times)
-    rng = np.random.default_rng(seed)
-    S, N = door_surface_world(true, 0.01)
-    fine, _ = door_surface_world(true, 0.01 / 2.3)
-    obs = [moved(true, qk, fine[rng.choice(len(fine), 400, replace=False)])[0] + rng.normal(0, sigma, (400, 3)) for qk in q]
-    keep = surface_faces(N)
-    data = ScrewData(init, times, (q + rng.normal(0, 0.03, q.size))[:, None], {"door": obs},
-                     {"door": SurfaceModel("door", S[keep], N[keep])}, delta=0.002, gate=0.05)
+    data, q = noisy_door_data(true, init, sigma, seed, surface_faces)
     return true, data, q
 
 
@@ -305,19 +296,25 @@ def test_weakly_weighted_dynamics_leave_the_inertia_to_its_prior(pushed):
     assert ident["damping:hinge"]["status"] == "not_identified"
 
 
-def test_an_unconverged_full_stage_that_fits_the_points_as_well_is_kept():
-    """The door's mesh inertia is half the truth's.  Stopped two iterations before it would
-    converge, the full stage has found the inertia (ratio 2) while its visual term is within noise
-    of the warm-up's: its iterate is kept instead of the mesh's inertia.  (The stop is set from
-    the converged solve's iteration count: a fixed count of 20 landed, with numpy 2.4 / scipy 1.17,
-    on an iterate whose visual term is still 0.8 above the warm-up's.)"""
+def _half_inertia_door() -> ScrewData:
+    """The pushed damped door seen at 10 Hz (q noise 0.02 rad), its mesh inertia half the truth's
+    and the closed form off by TILT and ~1 cm."""
     true = door_model(AXIS, ORIGIN, damping=0.5)
     init = door_model(TILT @ AXIS, ORIGIN + [0.01, -0.008, 0.0])
     inert = init.link("door").inertial
     init = init.with_link("door", inertial=dataclasses.replace(inert, mass=inert.mass / 2, inertia=inert.inertia / 2))
     t, q, _, w = pushed_trajectory(true, 1.5, 120, 0.5, 1.0)
     idx = np.arange(0, t.size, 12)
-    data = exact_data(true, init, t[idx], q[idx], q[idx] + np.random.default_rng(1).normal(0, 0.02, idx.size), wrenches=w)
+    return exact_data(true, init, t[idx], q[idx], q[idx] + np.random.default_rng(1).normal(0, 0.02, idx.size), wrenches=w)
+
+
+def test_an_unconverged_full_stage_that_fits_the_points_as_well_is_kept():
+    """The door's mesh inertia is half the truth's.  Stopped two iterations before it would
+    converge, the full stage has found the inertia (ratio 2) while its visual term is within noise
+    of the warm-up's: its iterate is kept instead of the mesh's inertia.  (The stop is set from
+    the converged solve's iteration count: a fixed count of 20 landed, with numpy 2.4 / scipy 1.17,
+    on an iterate whose visual term is still 0.8 above the warm-up's.)"""
+    data = _half_inertia_door()
     converged = refine_screws(data, ScrewOptions(energy="soft", reweight_dyn=False))
     n = next(s for s in converged.stages if s["stage"] == "full")["iterations"]
     assert n > 10, "the full stage converges too fast for this test to stop it early"
@@ -335,13 +332,7 @@ def test_an_unconverged_full_stage_that_is_refused_is_continued_from_its_iterate
     mesh's); without it the fit would fall back to the warm-up's (the mesh's)."""
     from kinemaforge_opt.nlp import reconstruction as reco
 
-    true = door_model(AXIS, ORIGIN, damping=0.5)
-    init = door_model(TILT @ AXIS, ORIGIN + [0.01, -0.008, 0.0])
-    inert = init.link("door").inertial
-    init = init.with_link("door", inertial=dataclasses.replace(inert, mass=inert.mass / 2, inertia=inert.inertia / 2))
-    t, q, _, w = pushed_trajectory(true, 1.5, 120, 0.5, 1.0)
-    idx = np.arange(0, t.size, 12)
-    data = exact_data(true, init, t[idx], q[idx], q[idx] + np.random.default_rng(1).normal(0, 0.02, idx.size), wrenches=w)
+    data = _half_inertia_door()
     options = ScrewOptions(energy="soft", reweight_dyn=False)
     n = next(s for s in refine_screws(data, options).stages if s["stage"] == "full")["iterations"]
     monkeypatch.setattr(reco, "VIS_SLACK", -np.inf)

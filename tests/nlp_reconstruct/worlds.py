@@ -93,6 +93,24 @@ def exact_data(true: ArticulatedModel, init: ArticulatedModel, times: np.ndarray
                      delta=0.002, gate=0.05, wrenches=wrenches, pushed_link=pushed)
 
 
+def noisy_door_data(true: ArticulatedModel, init: ArticulatedModel, sigma: float, seed: int = 0,
+                    surface_faces=None, delta: float = 0.002) -> tuple[ScrewData, np.ndarray]:
+    """The door ``true`` opening to 1.4 rad over 8 frames, 400 observed points per frame from every
+    face with isotropic Gaussian noise ``sigma`` [m], the closed form ``init`` (its q with 0.03
+    noise); the surface model holds the faces where ``surface_faces(normals)`` is True (default:
+    all).  Returns (ScrewData, true q (8,))."""
+    times = np.linspace(0.0, 2.0, 8)
+    q = 1.4 * np.sin(0.7 * times)
+    rng = np.random.default_rng(seed)
+    S, N = door_surface_world(true, 0.01)
+    fine, _ = door_surface_world(true, 0.01 / 2.3)
+    obs = [moved(true, qk, fine[rng.choice(len(fine), 400, replace=False)])[0] + rng.normal(0, sigma, (400, 3)) for qk in q]
+    keep = np.ones(len(N), bool) if surface_faces is None else surface_faces(N)
+    data = ScrewData(init, times, (q + rng.normal(0, 0.03, q.size))[:, None], {"door": obs},
+                     {"door": SurfaceModel("door", S[keep], N[keep])}, delta=delta, gate=0.05)
+    return data, q
+
+
 def pushed_trajectory(model: ArticulatedModel, duration: float, hz: float, push_s: float, force: float):
     """Integrate the door pushed at its far edge by a force of ``force`` [N] normal to the door for
     ``push_s`` [s] (then released), with pinocchio's numeric ABA and the model's damping.  Returns
