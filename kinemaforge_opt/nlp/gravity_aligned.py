@@ -78,4 +78,4 @@ def prefer_aligned(j_free: float, j_aligned: float, n: int, k: int) -> bool:
     """BIC: the aligned fit (objective ``j_aligned``, k fewer parameters) is preferred to the free
     one (``j_free``) when 2 n (j_aligned − j_free) ≤ k ln n; objectives normalised by n as the
     screw NLP's are (each term ≈ ½ χ² / n)."""
-    return 2.0 * n * (j_aligned - j_free) <= k * np.log(max(n, 2))
+    return bool(2.0 * n * (j_aligned - j_free) <= k * np.log(max(n, 2)))

@@ -1020,7 +1020,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             # an unconverged iterate is kept only if it fits the observed points no worse (VIS_SLACK)
             accepted = res.success or (not converged_only and (
                 not corr or vis_value(data, candidate, corr) <= vis_value(data, state, corr) + VIS_SLACK))
-            accepted = accepted and (accept is None or accept(res))
+            accepted = bool(accepted and (accept is None or accept(res)))
             if accepted:
                 state = candidate
             else:

@@ -4,6 +4,7 @@ screw NLP, against doors whose true axes are known."""
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -72,6 +73,8 @@ def test_a_plumb_door_fitted_from_noisy_points_comes_out_exactly_plumb():
     assert _axis_error_deg(aligned.model, true) < 1e-6
     assert any(n.startswith("axes: hinge plumb") and n.endswith("kept") for n in aligned.notes)
     assert [s["stage"] for s in aligned.stages][-1] == "gravity_aligned"
+    # what reconstruction.json keeps of each stage is plain JSON
+    json.dumps([{k: s[k] for k in ("stage", "iterations", "success", "accepted", "status", "costs")} for s in aligned.stages])
 
 
 @pytest.mark.parametrize("tilt_deg", [1.0, 2.0])
