@@ -37,7 +37,8 @@ Hessian of the expanded graph, still ``hessian="flat"``) to ~0.5 s; L-BFGS did n
 there.  Coarse-to-fine (:func:`refine_screws`): closed-form init → ``vis`` warm-up
 on the frame grid with correspondences refreshed between solves → the same warm-up with pairs
 beyond 3 robust standard deviations of its settled residuals left out (:func:`residual_gate`) →
-full objective on the dense grid.
+full objective on the dense grid → the same with every axis near plumb or level made so, kept
+when the BIC prefers it (:mod:`.gravity_aligned`).
 """
 
 from __future__ import annotations
