@@ -95,11 +95,6 @@ STOP_BAND = 0.02
 # with its normalised visual term 6e-5 of itself higher and was dropped, mesh masses 4.6 / 12.4 kg
 # kept for true 5.7 / 6.1 kg; kept: 8.3 / 6.2 kg, 1-s drift 0.062 -> 0.004 m).
 VIS_SLACK = 0.5
-# Iterations of the gravity-aligned refit (:mod:`.gravity_aligned`): started from the free fit with
-# its axes turned plumb or level, it converged in 5-18 iterations where the BIC kept it on the
-# bench cases; one that needs far more is moving far from the free fit, which the BIC refuses
-# (refrigerator_1@s1: 200 iterations without converging, then Δχ² 640 for a bound of 36).
-ALIGNED_MAX_ITER = 50
 # Pairs beyond this many robust standard deviations of the warm-up's residuals are outliers (the
 # 3σ rule; :func:`residual_gate`).
 PLANE_GATE_SIGMAS = 3.0
@@ -1007,15 +1002,14 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     opts = dataclasses.replace(options, dyn=want_dense)
 
     def run(name, corr, dense, held=frozenset(), converged_only=False, start=None, aligned=None, accept=None,
-            stage_options=None, max_iter=None):
+            stage_options=None):
         """Solve a stage from ``start`` (default: the current state) with ``stage_options``
-        (default: the current ones) and at most ``max_iter`` iterations (default: the options');
-        ``accept``: a test of a converged result that must also pass.  Returns (problem, result,
-        the unaccepted last iterate or None)."""
+        (default: the current ones); ``accept``: a test of a converged result that must also
+        pass.  Returns (problem, result, the unaccepted last iterate or None)."""
         nonlocal state
         t0 = time.perf_counter()
         sp = build_screw_problem(data, stage_options or opts, start or state, corr, dense, held, aligned)
-        res = sp.problem.solve(max_iter=max_iter or options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn, sp.hess_lag))
+        res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn, sp.hess_lag))
         accepted, iterate = False, None
         if np.isfinite(res.objective) and _physical(data, candidate := read_solution(sp, res)):
             # an unconverged iterate is kept only if it fits the observed points no worse (VIS_SLACK)
@@ -1110,7 +1104,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             sp_al, res_al, _ = run("gravity_aligned", corr, sp.use_dyn, held, converged_only=True,
                                    start=dataclasses.replace(state, axes=start_axes), aligned=rows,
                                    accept=lambda r: prefer_aligned(j_free, r.objective, n_res, saved),
-                                   stage_options=sp.options, max_iter=min(options.max_iter, ALIGNED_MAX_ITER))
+                                   stage_options=sp.options)
             verdict = "kept" if stages[-1]["accepted"] else "refused"
             tested = "axes: " + ", ".join(f"{name} {kind}" for name, (kind, _) in aligned.items())
             if res_al.success:
