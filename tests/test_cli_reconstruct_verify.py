@@ -38,3 +38,23 @@ def test_reconstruct_verifies_and_view_shows_it(tmp_path, capsys):
     for j in model.movable_joints:
         assert f"/meshcat/recorded/{j.parent}/joint_{j.name}/axis/head" in paths_set
     assert any(c["type"] == "set_animation" for c in cmds)
+
+
+@pytest.mark.parametrize("flags,aligned", [([], True), (["--free-axes"], False)])
+def test_free_axes_switches_the_gravity_aligned_refit_off(tmp_path, monkeypatch, flags, aligned):
+    """`--free-axes` reaches the screw NLP's options (the run stops at the reconstruction)."""
+    from kinemaforge_opt.commands import reconstruct as command
+
+    seen = {}
+
+    def stop(*args, **kwargs):
+        seen.update(kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(command, "reconstruct_sequence", stop)
+    seq = tmp_path / "seq"
+    seq.mkdir()
+    (seq / "sequence.json").write_text("{}")
+    with pytest.raises(KeyboardInterrupt):
+        main(["reconstruct", str(seq), "-o", str(tmp_path / "out"), *flags])
+    assert seen["nlp_options"].gravity_aligned is aligned

@@ -12,6 +12,7 @@ from ..graph import infer_tree
 from ..graph.tree import GraphResult
 from ..io.atomic import write_text_atomic
 from ..io.tracks import read_sturm_log, read_tracks
+from ..nlp.reconstruction import ScrewOptions
 from ..perception.reconstruct import DEFAULT_DENSITY, reconstruct_sequence
 
 HELP = """\
@@ -65,6 +66,10 @@ def register(subparsers) -> None:
     nlp.add_argument("--energy", choices=("soft", "hard", "off"), default="soft",
                      help="energy balance as a soft penalty (default), a hard constraint, or off")
     nlp.add_argument("--energy-weight", type=float, default=1.0, help="weight of the soft energy penalty, default 1")
+    nlp.add_argument("--free-axes", dest="gravity_aligned", action="store_false",
+                     help="keep every axis as fitted: no refit with the axes within 3° of plumb or level made "
+                          "so (by default that refit is kept when the BIC prefers it; see its note in "
+                          "reconstruction.json[\"nlp\"][\"notes\"])")
     p.set_defaults(func=run)
 
 
@@ -131,7 +136,8 @@ def _run_sequence(args) -> int:
 
     rec = reconstruct_sequence(args.input, args.out, method=args.method, k_best=args.k_best, density=args.density,
                                nlp=args.nlp, coarse_to_fine=args.coarse_to_fine, energy=args.energy,
-                               energy_weight=args.energy_weight)
+                               energy_weight=args.energy_weight,
+                               nlp_options=ScrewOptions(gravity_aligned=args.gravity_aligned))
     for j in rec.document["joints"]:
         print(f"{j['name']}: {j['type']} {j['parent']} -> {j['child']} axis {[round(a, 3) for a in j['axis_world']]} "
               f"(ρ = {j['confidence']:.2f})")
