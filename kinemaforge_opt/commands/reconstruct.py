@@ -141,6 +141,9 @@ def _run_sequence(args) -> int:
     for j in rec.document["joints"]:
         print(f"{j['name']}: {j['type']} {j['parent']} -> {j['child']} axis {[round(a, 3) for a in j['axis_world']]} "
               f"(ρ = {j['confidence']:.2f})")
+    for note in (rec.document.get("nlp") or {}).get("notes", []):
+        if note.startswith("axes:"):  # the gravity-aligned refit's decision (--free-axes turns it off)
+            print(note)
     print(f"wrote {args.out / 'reconstruction.json'}, model.urdf, meshes/, clouds.npz "
           f"({rec.document['timing_s']['total']:.1f} s)", flush=True)
     if not rec.model.movable_joints:
