@@ -1095,9 +1095,14 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     if options.gravity_aligned and res.success and fitted_state:
         aligned = {j.name: (kind, constraint_rows(data.model, j.name, kind)) for k, j in enumerate(data.model.movable_joints)
                    if (kind := alignment(data.model, j.name, state.axes[k]))}
-        if aligned:
-            rows = {name: c for name, (_, c) in aligned.items()}
-            saved = sum(c.shape[0] for c in rows.values())
+        kept: dict[str, np.ndarray] = {}
+
+        def try_aligned(names: list[str]) -> bool:
+            """Refit with ``names`` aligned on top of the joints already kept aligned; keep it if
+            the BIC prefers it to the current fit (the parameters saved: those of ``names``)."""
+            nonlocal sp, res
+            rows = {**kept, **{name: aligned[name][1] for name in names}}
+            saved = sum(aligned[name][1].shape[0] for name in names)
             start_axes = np.array([project(a, rows[j.name]) if j.name in rows else a
                                    for a, j in zip(state.axes, data.model.movable_joints)])
             j_free, n_res = res.objective, max(sp.n_vis, 1)
@@ -1105,15 +1110,23 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                                    start=dataclasses.replace(state, axes=start_axes), aligned=rows,
                                    accept=lambda r: prefer_aligned(j_free, r.objective, n_res, saved),
                                    stage_options=sp.options)
-            verdict = "kept" if stages[-1]["accepted"] else "refused"
-            tested = "axes: " + ", ".join(f"{name} {kind}" for name, (kind, _) in aligned.items())
+            ok = stages[-1]["accepted"]
+            tested = "axes: " + ", ".join(f"{name} {aligned[name][0]}" for name in names)
             if res_al.success:
-                notes.append(f"{tested} tested (BIC, {saved} parameters): Δχ² "
-                             f"{2 * n_res * (res_al.objective - j_free):.1f} vs {saved * np.log(max(n_res, 2)):.1f}, {verdict}")
+                notes.append(f"{tested} tested (BIC, {saved} parameters): Δχ² {2 * n_res * (res_al.objective - j_free):.1f}"
+                             f" vs {saved * np.log(max(n_res, 2)):.1f}, {'kept' if ok else 'refused'}")
             else:
                 notes.append(f"{tested} tested: the aligned fit did not converge ({res_al.status}), refused")
-            if stages[-1]["accepted"]:
+            if ok:
                 sp, res = sp_al, res_al
+                kept.update(rows)
+            return ok
+
+        # all at once; refused with several candidates, each on its own (one askew hinge, or a
+        # joint set whose aligned fit does not converge, does not hold back the others)
+        if aligned and not try_aligned(list(aligned)) and len(aligned) > 1:
+            for name in aligned:
+                try_aligned([name])
     model = state_model(data, state)
     cols = np.searchsorted(state.t, data.times)
     terms = {"vis": None, "dyn": None, "energy": None, "inertia_prior": None}

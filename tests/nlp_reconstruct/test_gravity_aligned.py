@@ -91,3 +91,30 @@ def test_switching_it_off_leaves_no_trace():
     r = refine_screws(data, dataclasses.replace(ScrewOptions(dyn=False), gravity_aligned=False))
     assert "gravity_aligned" not in [s["stage"] for s in r.stages]
     assert not any(n.startswith("axes:") for n in r.notes)
+
+
+def test_one_askew_hinge_does_not_hold_back_a_plumb_one():
+    """Two doors, hinge_a plumb and hinge_b tilted 2°, both within reach of the test.  Aligned
+    together the fit is refused (hinge_b's tilt is in the points); each on its own, hinge_a is
+    kept exactly plumb and hinge_b keeps its tilt."""
+    from kinemaforge_opt.io.sequence import Wrenches
+
+    from .worlds import two_door_data, two_doors
+
+    plumb, tilted = np.array([0.0, 0.0, 1.0]), _tilted(2.0, about=(1.0, 1.0, 0.0))
+    origin_b = ORIGIN + [0.0, 1.0, 0.0]
+    true = two_doors(plumb, ORIGIN, origin_b, damping_a=0.0).with_joint("hinge_b", axis=tilted)
+    off = exp_so3(normalize([1.0, -1.0, 0.0]) * np.radians(1.5))
+    init = two_doors(off @ plumb, ORIGIN, origin_b, damping_a=0.0).with_joint("hinge_b", axis=off @ tilted)
+    times = np.linspace(0.0, 2.0, 8)
+    Q = np.column_stack([1.4 * np.sin(0.7 * times), 1.2 * np.sin(0.9 * times)])
+    rng = np.random.default_rng(3)
+    no_force = Wrenches(times, np.zeros((times.size, 3)), np.zeros((times.size, 3)))
+    data = two_door_data(true, init, times, Q, Q + rng.normal(0, 0.03, Q.shape), no_force, point_sigma=0.002, rng=rng)
+    r = refine_screws(data, ScrewOptions(dyn=False))
+    axes_notes = [n for n in r.notes if n.startswith("axes:")]
+    assert axes_notes[0].startswith("axes: hinge_a plumb, hinge_b plumb") and axes_notes[0].endswith("refused")
+    assert axes_notes[1].startswith("axes: hinge_a plumb") and axes_notes[1].endswith("kept")
+    assert axes_notes[2].startswith("axes: hinge_b plumb") and axes_notes[2].endswith("refused")
+    assert np.degrees(axis_angle_error(r.model.joint("hinge_a").axis, plumb)) < 1e-6
+    assert np.degrees(axis_angle_error(r.model.joint("hinge_b").axis, tilted)) < 0.1
