@@ -24,6 +24,13 @@ def normalize(v: np.ndarray) -> np.ndarray:
     return v / n
 
 
+def tangent_basis(a: np.ndarray) -> np.ndarray:
+    """(3, 2) orthonormal basis of the plane perpendicular to the unit vector ``a`` (3,)."""
+    helper = np.eye(3)[np.argmin(np.abs(a))]
+    u = normalize(np.cross(a, helper))
+    return np.stack([u, np.cross(a, u)], axis=1)
+
+
 def exp_so3(w: np.ndarray) -> np.ndarray:
     """Rodrigues: rotation vector (3,) [rad] -> rotation matrix (3, 3)."""
     w = np.asarray(w, dtype=float)

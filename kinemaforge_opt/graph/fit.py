@@ -24,7 +24,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import csr_matrix
 from scipy.spatial.transform import Rotation
 
-from ..spatial import normalize
+from ..spatial import normalize, tangent_basis
 from .motion import RelativeMotion
 
 JOINT_TYPES = ("rigid", "prismatic", "revolute", "helical")
@@ -86,13 +86,6 @@ class JointHypothesis:
     rotation_sigma: float = 0.0
     times: np.ndarray | None = None
     position_residuals: np.ndarray | None = None
-
-
-def _tangent_basis(a: np.ndarray) -> np.ndarray:
-    """(3, 2) orthonormal basis of the plane perpendicular to unit ``a``."""
-    helper = np.eye(3)[np.argmin(np.abs(a))]
-    u = normalize(np.cross(a, helper))
-    return np.stack([u, np.cross(a, u)], axis=1)
 
 
 def _rot(axis_angles: np.ndarray) -> np.ndarray:
@@ -223,7 +216,7 @@ def _fit_pose(kind: str, m: RelativeMotion) -> JointHypothesis:
         R0 = _chordal_mean(Rs)
         c = ps.mean(axis=0)
         a0 = np.linalg.svd(ps - c)[2][0]
-        B = _tangent_basis(a0)
+        B = tangent_basis(a0)
         d0 = (ps - c) @ a0
 
         def model(x):
@@ -287,7 +280,7 @@ def _fit_pose_screw(kind: str, m: RelativeMotion) -> JointHypothesis:
     starts = []
     for start in (_rotation_start, _position_start):
         a0, c0, phi, h0 = start(m, ref, bool(nh))
-        B = _tangent_basis(a0)
+        B = tangent_basis(a0)
 
         def model(x, a0=a0, c0=c0, B=B):
             a = normalize(a0 + B @ x[:2])
@@ -345,7 +338,7 @@ def _fit_points(kind: str, m: RelativeMotion) -> JointHypothesis:
         x0, n_glob, k = np.median(ps, axis=0), 3, 3
     elif kind == "prismatic":
         a0 = Vt[0]
-        B = _tangent_basis(a0)
+        B = tangent_basis(a0)
 
         def model(x):
             return mean + B @ x[2:4] + x[4:, None] * normalize(a0 + B @ x[:2])
@@ -354,7 +347,7 @@ def _fit_points(kind: str, m: RelativeMotion) -> JointHypothesis:
     else:  # revolute / helical: plane (normal = axis) + algebraic circle fit in that plane
         a0, centre0, r0, U0, th0 = _circle(ps)
         nh = 1 if kind == "helical" else 0
-        B = _tangent_basis(a0)
+        B = tangent_basis(a0)
 
         def frame(x):
             a = normalize(a0 + B @ x[3:5])
@@ -471,7 +464,7 @@ def flip_angles(Rs: np.ndarray) -> np.ndarray:
     n = _half_turn_axis(A[far])
     b1 = _top_axis(n)
     rest = n[np.abs(n @ b1) < np.cos(np.pi / 4)]
-    b2 = _top_axis(rest - np.outer(rest @ b1, b1)) if len(rest) else _tangent_basis(b1)[:, 0]
+    b2 = _top_axis(rest - np.outer(rest @ b1, b1)) if len(rest) else tangent_basis(b1)[:, 0]
     b2 = normalize(b2 - b1 * (b2 @ b1))
     out = d[ref]
     for b in (b1, b2, np.cross(b1, b2)):

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import ArticulatedModel
+from ..spatial import tangent_basis
 
 # Axes within this angle of plumb or level are tested (a larger tilt is a design, not an error).
 NEAR_DEG = 3.0
@@ -60,12 +61,7 @@ def constraint_rows(model: ArticulatedModel, joint_name: str, kind: str) -> np.n
     R = world_rotation(model, joint_name)
     up = -np.asarray(model.gravity, float)
     up = R.T @ (up / np.linalg.norm(up))
-    if kind == "level":
-        return up[None, :]
-    helper = np.eye(3)[np.argmin(np.abs(up))]
-    e1 = np.cross(up, helper)
-    e1 /= np.linalg.norm(e1)
-    return np.stack([e1, np.cross(up, e1)])
+    return up[None, :] if kind == "level" else tangent_basis(up).T
 
 
 def project(axis: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -74,8 +70,14 @@ def project(axis: np.ndarray, rows: np.ndarray) -> np.ndarray:
     return a / np.linalg.norm(a)
 
 
+def bic_test(j_free: float, j_aligned: float, n: int, k: int) -> tuple[float, float]:
+    """(Δχ², bound) of the BIC test: Δχ² = 2 n (j_aligned − j_free) of the aligned fit (k fewer
+    parameters) against the free one, bound = k ln n; objectives normalised by n as the screw
+    NLP's are (each term ≈ ½ χ² / n)."""
+    return 2.0 * n * (j_aligned - j_free), k * float(np.log(max(n, 2)))
+
+
 def prefer_aligned(j_free: float, j_aligned: float, n: int, k: int) -> bool:
-    """BIC: the aligned fit (objective ``j_aligned``, k fewer parameters) is preferred to the free
-    one (``j_free``) when 2 n (j_aligned − j_free) ≤ k ln n; objectives normalised by n as the
-    screw NLP's are (each term ≈ ½ χ² / n)."""
-    return bool(2.0 * n * (j_aligned - j_free) <= k * np.log(max(n, 2)))
+    """BIC: the aligned fit is preferred when its Δχ² is at most the bound (:func:`bic_test`)."""
+    dchi2, bound = bic_test(j_free, j_aligned, n, k)
+    return bool(dchi2 <= bound)

@@ -58,7 +58,7 @@ from ..physics.effects import EFFECTS
 from ..symbolic import build_dynamics
 from .inertial_scales import MIN_COM_SCALE, com_scale, has_axis_ratio, link_axis, scaled_inertial, scaled_parameters
 from .problem import Problem, Result
-from .gravity_aligned import alignment, constraint_rows, prefer_aligned, project
+from .gravity_aligned import alignment, bic_test, constraint_rows, prefer_aligned, project
 from .structured_hessian import DenseTerms, lagrangian_hessian
 from .visual import Correspondences, SurfaceModel, correspond, surface_model, fixed_subsample, pseudo_huber, robust_value, z_vector
 
@@ -1113,8 +1113,9 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             ok = stages[-1]["accepted"]
             tested = "axes: " + ", ".join(f"{name} {aligned[name][0]}" for name in names)
             if res_al.success:
-                notes.append(f"{tested} tested (BIC, {saved} parameters): Δχ² {2 * n_res * (res_al.objective - j_free):.1f}"
-                             f" vs {saved * np.log(max(n_res, 2)):.1f}, {'kept' if ok else 'refused'}")
+                dchi2, bound = bic_test(j_free, res_al.objective, n_res, saved)
+                notes.append(f"{tested} tested (BIC, {saved} parameters): Δχ² {dchi2:.1f} vs {bound:.1f}, "
+                             f"{'kept' if ok else 'refused'}")
             else:
                 notes.append(f"{tested} tested: the aligned fit did not converge ({res_al.status}), refused")
             if ok:

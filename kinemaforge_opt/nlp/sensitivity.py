@@ -17,6 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..spatial import normalize, tangent_basis
 from .joint_space import JointSpaceFit
 
 
@@ -47,14 +48,6 @@ def ar1_inflation(residuals: np.ndarray) -> float:
     """Variance inflation (1 + rho)/(1 - rho) of the mean of AR(1)-correlated residuals."""
     rho = lag1_autocorrelation(residuals)
     return (1 + rho) / (1 - rho)
-
-
-def _tangent_basis(a: np.ndarray) -> np.ndarray:
-    a = a / np.linalg.norm(a)
-    helper = np.eye(3)[np.argmin(np.abs(a))]
-    u = np.cross(a, helper)
-    u /= np.linalg.norm(u)
-    return np.stack([u, np.cross(a, u)], axis=1)  # (3, 2)
 
 
 def fit_sensitivity(fit: JointSpaceFit, X: np.ndarray, z: np.ndarray, rel_tol: float = 1e-9) -> Sensitivity:
@@ -95,7 +88,7 @@ def fit_sensitivity(fit: JointSpaceFit, X: np.ndarray, z: np.ndarray, rel_tol: f
     offset = n_free
     for b in fit.blocks:
         if b.name.endswith(".axis"):
-            Bt = _tangent_basis(z[offset - n_free : offset - n_free + 3])
+            Bt = tangent_basis(normalize(z[offset - n_free : offset - n_free + 3]))
             for k in range(2):
                 e = np.zeros(nrow)
                 e[offset : offset + 3] = Bt[:, k]
