@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import casadi as ca
 import numpy as np
 
 from ..model.articulated import ArticulatedModel
@@ -79,8 +80,10 @@ def gravity_lever(model: ArticulatedModel, joint: str) -> float | None:
 
 
 def _columns(q, v, vs: float, sign) -> dict[str, np.ndarray]:
-    return {"v": -v, "sign": -sign(v), "stribeck": -np.exp(-((v / vs) ** 2)) * sign(v),
-            "q": -q, "one": np.ones_like(q), "drag": -v * np.abs(v), "sin": np.sin(q), "cos": np.cos(q)}
+    """The library's columns at q, v: numpy arrays (T,), or CasADi symbols (a simulated law)."""
+    xp = ca if isinstance(q, (ca.SX, ca.MX)) else np
+    return {"v": -v, "sign": -sign(v), "stribeck": -xp.exp(-((v / vs) ** 2)) * sign(v),
+            "q": -q, "one": 0 * q + 1, "drag": -v * abs(v), "sin": xp.sin(q), "cos": xp.cos(q)}
 
 
 def joint_library(model: ArticulatedModel, joint: str, q: np.ndarray, v: np.ndarray, id_force: np.ndarray) -> JointLibrary:
@@ -122,8 +125,8 @@ def force_law(lib: JointLibrary, coef: dict[str, float]):
     not a force law but an inertia change; see :func:`kinemaforge_opt.bench.predict.augmented`).
     Uses the smooth sign of the effect library so the law can be integrated."""
 
-    def force(q: float, v: float) -> float:
-        cols = _columns(np.asarray(q), np.asarray(v), lib.v_stribeck, smooth_sign)
-        return float(sum(coef[c] * cols[c] for c in coef if c != "id" and coef[c] != 0.0))
+    def force(q, v):  # q, v: the simulator's CasADi symbols of the joint
+        cols = _columns(q, v, lib.v_stribeck, smooth_sign)
+        return sum(coef[c] * cols[c] for c in coef if c != "id" and coef[c] != 0.0)
 
     return force

@@ -28,7 +28,7 @@ def _is_symbolic(x) -> bool:
 
 def smooth_sign(v, eps: float = V_SMOOTH):
     """tanh(v / eps): a differentiable sign(v)."""
-    if isinstance(v, float):  # a scalar (simulations call this ~10^4 times a second)
+    if isinstance(v, float):  # a scalar: math.tanh, without numpy's per-call overhead
         return math.tanh(v / eps)
     return ca.tanh(v / eps) if _is_symbolic(v) else np.tanh(np.asarray(v) / eps)
 

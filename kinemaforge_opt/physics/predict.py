@@ -1,7 +1,7 @@
 """Open-loop predictions of a recording: a model simulated under the recorded forcing, each
 span (or each piece of it) from the state that best fits its first ``STATE_WINDOW_S``, and the
 before/after comparison (:class:`HeldOut`) that :func:`~kinemaforge_opt.physics.diagnose.diagnose`
-and the benchmarks score.  Pinocchio's ABA integrated by LSODA (scipy)."""
+and the benchmarks score.  The bridge's ABA integrated by CVODES (CasADi)."""
 
 from __future__ import annotations
 
@@ -11,13 +11,12 @@ import numpy as np
 
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
-from ..model.pinocchio import build_pin_model
 
 # Held-out prediction: each model's starting state is fitted over this first part of a span [s]
 # (see simulate_recording); the rest of the span is the prediction that is scored.
 STATE_WINDOW_S = 0.3
 
-# Simulations (held-out and fit-span checks): LSODA tolerances (relative, absolute [rad or m]),
+# Simulations (held-out and fit-span checks): CVODES tolerances (relative, absolute [rad or m]),
 # far below the encoder noise; the starting state's least-squares fit differentiates them with
 # this fixed step in its scaled variables (q [rad or m], v × window [rad or m]).
 SIM_RTOL, SIM_ATOL = 1e-5, 1e-7
@@ -102,11 +101,68 @@ def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec:
     return HeldOut(rec.t[ok], rec.q[ok], q_b[ok], q_a[ok])
 
 
+def _dynamics_dae(model: ArticulatedModel, extra: dict | None) -> dict:
+    """The CasADi DAE of ``model`` under a joint force linear in time between samples:
+    x = (q, v) (2n,), u = (a, b) (2n,) with tau(t) = a + b t on an interval, ode = (v, ABA(q, v,
+    tau + passive)); passive = the model's joint dynamics (the effect library's laws) plus the
+    ``extra`` laws f(q, v) per joint name, evaluated on CasADi symbols."""
+    import casadi as ca
+
+    from ..symbolic import build_dynamics
+    from .effects import EFFECTS, dynamics_effects, effect_arguments
+
+    dyn = build_dynamics(model)
+    n = model.nq
+    x, u, t = ca.SX.sym("x", 2 * n), ca.SX.sym("u", 2 * n), ca.SX.sym("t")
+    q, v = x[:n], x[n:]
+    passive = []
+    for k, j in enumerate(model.movable_joints):
+        f = 0
+        for e in dynamics_effects(j.dynamics):
+            params, kwargs = effect_arguments(j.dynamics, e)
+            f += EFFECTS[e].force(q[k], v[k], *params, **kwargs)
+        if (extra or {}).get(j.name) is not None:
+            f += extra[j.name](q[k], v[k])
+        passive.append(f)
+    a = dyn.aba(q, v, u[:n] + u[n:] * t + ca.vertcat(*passive), dyn.theta0)
+    return {"x": x, "u": u, "t": t, "ode": ca.vertcat(v, a)}
+
+
+def _integrate(dae: dict, t: np.ndarray, U: np.ndarray, x0: np.ndarray, opts: dict, cache: dict) -> np.ndarray:
+    """States (m, 2n) of ``dae`` at times ``t`` (m,) [s] from ``x0`` (2n,), ``U`` (2n, m - 1) the
+    force coefficients per interval.  ``cache`` keeps the integrator of each grid length (a state
+    fit integrates one grid many times).  Where CVODES gives up (a diverging law), the longest
+    prefix of the grid that integrates is kept, found by bisection, and its last state held."""
+    import casadi as ca
+
+    def states(m: int) -> np.ndarray:
+        if m < 2:
+            return x0[None, :].copy()
+        if m not in cache:
+            cache[m] = ca.integrator("simulate", "cvodes", dae, float(t[0]), t[1:m].tolist(), opts)
+        return np.vstack([x0, cache[m](x0=x0, u=U[:, : m - 1])["xf"].full().T])
+
+    try:
+        return states(t.size)
+    except RuntimeError:
+        good, bad = 1, t.size
+        while bad - good > 1:
+            mid = (good + bad) // 2
+            try:
+                states(mid)
+                good = mid
+            except RuntimeError:
+                bad = mid
+        x = states(good)
+        return np.vstack([x, np.repeat(x[-1:], t.size - good, axis=0)])
+
+
 def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | None = None,
                        state_window_s: float | None = None) -> np.ndarray:
-    """q (T, n) of ``model`` simulated over ``rec`` under its recorded tau, with the model's joint
-    dynamics plus optional per-joint ``extra`` force laws f(q, v) [N·m or N].  Pinocchio ABA,
-    integrated by LSODA (scipy).
+    """q (T, n) of ``model`` simulated over ``rec`` under its recorded tau (linear between
+    samples), with the model's joint dynamics plus optional per-joint ``extra`` force laws
+    f(q, v) [N·m or N] (written for CasADi symbols).  Pinocchio's ABA (the bridge's, on
+    ``casadi.SX``) integrated by CVODES (BDF, error-controlled: the smooth sign of friction is stiff).
 
     The initial state is the smoothed first state of the recording, or, with ``state_window_s``
     [s], the state that best reproduces (least squares) the model's motion over the first
@@ -114,64 +170,33 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
     observer would give it; those samples are then fitted, not predicted, and come back as NaN.
     (A state differentiated from a few noisy samples at the edge of a span can be so far off
     that it dominates the prediction error of every model alike.)"""
-    from bisect import bisect_right
-
-    import pinocchio as pin
-    from scipy.integrate import solve_ivp
     from scipy.optimize import least_squares
 
     from .locate import smooth_derivatives
 
-    pm = build_pin_model(model)
-    pd = pm.createData()
-    joints = model.movable_joints
-    n = len(joints)
-    laws = [(extra or {}).get(j.name) for j in joints]
+    n = model.nq
+    dae = _dynamics_dae(model, extra)
     q0, v0, _ = smooth_derivatives(rec)
     tau = rec.tau if rec.tau is not None else np.zeros((rec.t.size, n))
-
-    # Per joint, its passive force terms (the model's joint dynamics, then the extra law), looked
-    # up once: the right-hand side runs ~10^4 times per simulated second.
-    from .effects import EFFECTS, dynamics_effects, effect_arguments
-
-    terms = [[(EFFECTS[e].force, *effect_arguments(j.dynamics, e)) for e in dynamics_effects(j.dynamics)]
-             for j in joints]
-    # tau linear between samples (held at the ends): per interval i its start and slope
-    t_list, last = rec.t.tolist(), rec.t.size - 1
     slope = np.diff(tau, axis=0) / np.diff(rec.t)[:, None]
-    max_step = float(np.min(np.diff(rec.t)))
-    out = np.empty(2 * n)
+    U = np.hstack([tau[:-1] - slope * rec.t[:-1, None], slope]).T  # tau = a + b t per interval
+    # max_step_size: one sample interval, so a force pulse after a free coast is never stepped
+    # over; csparse: CVODES's default dense QR fails (too much work) on the 1e-156 entries the
+    # stop's softplus puts in the Jacobian far from the stop
+    opts = {"reltol": SIM_RTOL, "abstol": SIM_ATOL, "max_step_size": float(np.min(np.diff(rec.t))),
+            "linear_solver": "csparse"}
+    cache: dict = {}
 
-    def rhs(t, x):
-        q, v = x[:n], x[n:]
-        i = min(max(bisect_right(t_list, t) - 1, 0), last - 1)
-        u = tau[i] + slope[i] * min(max(t - t_list[i], 0.0), t_list[i + 1] - t_list[i])
-        for k in range(n):
-            for force, params, kwargs in terms[k]:
-                u[k] += force(q[k], v[k], *params, **kwargs)
-            if laws[k] is not None:
-                u[k] += laws[k](q[k], v[k])
-        out[:n] = v
-        out[n:] = pin.aba(pm, pd, q, v, u)
-        return out.copy()
-
-    def run(x0: np.ndarray, t_eval: np.ndarray) -> np.ndarray:
-        # max_step: one sample interval, so a force pulse after a free coast is never stepped over
-        # (LSODA grows its step on the smooth, force-free stretch and jumped whole pushes)
-        sol = solve_ivp(rhs, (t_eval[0], t_eval[-1]), x0, t_eval=t_eval, method="LSODA", rtol=SIM_RTOL, atol=SIM_ATOL,
-                        max_step=max_step)
-        q = sol.y[:n].T
-        if q.shape[0] < t_eval.size:  # integration stopped early: hold the last state
-            q = np.vstack([q, np.repeat(q[-1:], t_eval.size - q.shape[0], axis=0)])
-        return q
+    def run(x0: np.ndarray, m: int) -> np.ndarray:  # q (m, n) over the first m samples
+        return _integrate(dae, rec.t[:m], U, x0, opts, cache)[:, :n]
 
     x0 = np.concatenate([q0[0], v0[0]])
     window = np.zeros(rec.t.size, dtype=bool)
     if state_window_s:
         window = rec.t <= rec.t[0] + state_window_s
-        if window.sum() >= max(5, 2 * n + 1) and window.sum() < rec.t.size:
-            tw = rec.t[window]
-            scale = np.concatenate([np.full(n, 1.0), np.full(n, 1.0 / max(tw[-1] - tw[0], 1e-9))])
+        m = int(window.sum())
+        if m >= max(5, 2 * n + 1) and m < rec.t.size:
+            scale = np.concatenate([np.full(n, 1.0), np.full(n, 1.0 / max(rec.t[m - 1] - rec.t[0], 1e-9))])
 
             seen: dict[bytes, np.ndarray] = {}  # residuals by z: MINPACK asks for the Jacobian where it just evaluated them
 
@@ -179,7 +204,7 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
                 key = np.asarray(z, float).tobytes()
                 if key not in seen:
                     seen.clear()
-                    seen[key] = (run(z * scale, tw) - rec.q[window]).ravel()
+                    seen[key] = (run(z * scale, m) - rec.q[window]).ravel()
                 return seen[key]
 
             def jac(z):
@@ -193,6 +218,6 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
             x0 = fit.x * scale
         else:
             window[:] = False
-    q = run(x0, rec.t)
+    q = run(x0, rec.t.size)
     q[window] = np.nan
     return q

@@ -1,0 +1,77 @@
+"""The open-loop simulator behind every prediction (``physics.predict.simulate_recording``):
+CVODES on the bridge's ABA, checked against MuJoCo (the synthetic world's independent simulator)
+through a stop, and kept finite when a force law diverges."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinemaforge_opt.calibration import apply_parameters
+from kinemaforge_opt.io.recording import Recording
+from kinemaforge_opt.physics.diagnose import before_nominal_stops
+from kinemaforge_opt.physics.predict import predict_before_after, simulate_recording
+from kinemaforge_opt.synth.effects import ConcealedEffect as E
+from kinemaforge_opt.synth.groundtruth import HandPlan, simulate
+from kinemaforge_opt.synth.objects import make_object
+
+NOISE = 2e-3
+STOP, STIFFNESS = 0.45, 600.0  # [rad], [N·m/rad]
+
+
+@pytest.fixture(scope="module")
+def door_on_a_stop():
+    """A MuJoCo door with damping 0.5 N·m·s/rad pushed towards 0.5 rad onto an upper stop at
+    0.45 rad (600 N·m/rad), then towards 0.3 rad; 100 Hz, 2 mrad noise."""
+    obj = make_object("cabinet", 0)
+    j = obj.model.joint_names[0]
+    effects = (E("viscous_damping", j, 0.5), E("limit_contact", j, STOP, (("stiffness", STIFFNESS), ("side", "upper"))))
+    ep = simulate(obj.model, obj.handles, effects,
+                  plan=HandPlan(goals=(0.5, 0.3), push_s=0.8, free_s=1.7, release_speed=0.15), record_hz=100)
+    q = ep.q + np.random.default_rng(5).normal(0.0, NOISE, ep.q.shape)
+    return obj.model, j, Recording(ep.t, ep.joint_names, q, tau=ep.tau)
+
+
+def test_a_door_pressed_onto_its_stop_is_simulated_like_mujoco(door_on_a_stop):
+    """The true model (damping + the stop) in 1-s pieces, each from its fitted state, stays within
+    the noise of MuJoCo's motion through the contact; without the stop it does not."""
+    model, j, rec = door_on_a_stop
+    # up to where the stop throws the door back onto its closed end (a range limit MuJoCo
+    # enforces and the model's dynamics do not hold)
+    rec = before_nominal_stops(model, rec)
+    assert rec.q[:, 0].max() > STOP + 0.01  # the hand does press the door into the stop
+    damped = apply_parameters(model, {f"{j}.damping": np.array([0.5])})
+    truth = apply_parameters(damped, {f"{j}.limit_stop": np.array([STOP]), f"{j}.limit_stiffness": np.array([STIFFNESS])})
+    assert truth.joint(j).dynamics.limit_side == 1.0
+    h = predict_before_after(damped, truth, rec, 1.0)
+    assert h.rms_after < 1.5 * NOISE
+    assert h.rms_before > 5 * NOISE
+
+
+def test_a_diverging_law_holds_the_last_state_it_reached(door_on_a_stop):
+    """A law that drives the speed to infinity in finite time (f = 50 v^3) stops the integrator;
+    the simulation keeps the longest prefix it integrated and holds its last state, finite."""
+    model, j, rec = door_on_a_stop
+    q = simulate_recording(model, rec, extra={j: lambda q, v: 50.0 * v**3})
+    assert q.shape == rec.q.shape and np.isfinite(q).all()
+    held = np.flatnonzero(np.abs(np.diff(q[:, 0])) > 0)[-1] + 1  # last sample that moved
+    assert held < rec.t.size - 10  # it did give up early ...
+    assert np.all(q[held:, 0] == q[held, 0])  # ... and holds from there
+    # before giving up it followed the same law as the nominal model at first
+    q_nominal = simulate_recording(model, rec)
+    assert np.abs(q[:5, 0] - q_nominal[:5, 0]).max() < 1e-3
+
+
+@pytest.mark.parametrize("gap", [0.12, 0.15, 0.18, 0.21, 0.24])
+def test_a_door_coasting_below_a_stop_it_never_reaches_keeps_its_speed(gap):
+    """No force but a stop ``gap`` rad beyond the end of the motion (its softplus force there:
+    below 1e-100 N·m): a door about a plumb axis coasts at constant speed, q = 0.3 + 0.05 t.
+    (CVODES's default dense QR gave up on the Jacobian's tiny entries at gaps 0.12-0.18.)"""
+    obj = make_object("cabinet", 0)
+    j = obj.model.joint_names[0]
+    t = np.arange(0.0, 2.0 + 1e-9, 0.01)
+    q_true = 0.3 + 0.05 * t
+    rec = Recording(t, (j,), q_true[:, None], tau=np.zeros((t.size, 1)))
+    m = apply_parameters(obj.model, {f"{j}.limit_stop": np.array([q_true[-1] + gap]),
+                                     f"{j}.limit_stiffness": np.array([200.0])})
+    np.testing.assert_allclose(simulate_recording(m, rec)[:, 0], q_true, atol=1e-5)
