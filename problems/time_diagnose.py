@@ -1,14 +1,16 @@
 """Time ``diagnose`` on a 1-DOF recording and how its cost grows with the recording's length.
 
     PYTHONPATH=. .venv/bin/python -m problems.time_diagnose [CASE] [--hz 100] [--lengths 2.5 5 10 20]
-        [--profile OUT.prof] [--noise-seed 0]
+        [--repeat 1] [--profile OUT.prof] [--noise-seed 0]
 
 The recording is catalogue case CASE (default ``effect_door_coulomb_friction+viscous_damping``)
 simulated in MuJoCo with the benchmark's stroke plan repeated until it lasts the longest length
 (2.5 s per stroke), sampled at ``--hz`` with the benchmark's encoder noise, then cut to each
 length.  Prints per length the wall and CPU time of ``diagnose`` (the process's CPU time, so BLAS
-threads count), the samples and the effects it reported; with ``--profile`` the longest run is
-profiled by cProfile and the 12 functions with the most cumulative time are printed.
+threads count), the samples and the effects it reported; with ``--repeat N`` each length runs N
+times and the best and median CPU are printed too (the spread of one machine's timings is often
+larger than a change being measured); with ``--profile`` the longest run is profiled by cProfile
+and the functions with the most cumulative time are printed.
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ def main(argv=None) -> int:
     ap.add_argument("case", nargs="?", default="effect_door_coulomb_friction+viscous_damping")
     ap.add_argument("--hz", type=int, default=100)
     ap.add_argument("--lengths", type=float, nargs="+", default=[10.0])
+    ap.add_argument("--repeat", type=int, default=1, help="runs per length (best and median CPU printed)")
     ap.add_argument("--profile", help="write a cProfile of the longest run here and print its top entries")
     ap.add_argument("--noise-seed", type=int, default=0)
     args = ap.parse_args(argv)
@@ -59,14 +62,18 @@ def main(argv=None) -> int:
 
             prof = cProfile.Profile()
             prof.enable()
-        w0, c0 = time.perf_counter(), time.process_time()
-        d = diagnose(model, rec)
-        wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+        cpus = []
+        for _ in range(max(args.repeat, 1)):
+            w0, c0 = time.perf_counter(), time.process_time()
+            d = diagnose(model, rec)
+            wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+            cpus.append(cpu)
         if prof is not None:
             prof.disable()
             prof.dump_stats(args.profile)
         found = ", ".join(f"{e.type}={e.value:.4g}" for e in d.effects) or "nothing"
-        print(f"{seconds:5.1f} s, {rec.t.size:5d} samples: {wall:6.2f} s wall, {cpu:6.2f} s CPU; found {found}")
+        spread = f" (best {min(cpus):.2f}, median {float(np.median(cpus)):.2f} of {len(cpus)})" if len(cpus) > 1 else ""
+        print(f"{seconds:5.1f} s, {rec.t.size:5d} samples: {wall:6.2f} s wall, {cpu:6.2f} s CPU{spread}; found {found}")
     if args.profile:
         import pstats
 
