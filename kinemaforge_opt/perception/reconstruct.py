@@ -33,7 +33,7 @@ from ..nlp.visual import surface_model
 from ..spatial import inverse, make_transform
 from .change import STATIC, TEST_SIGMAS
 from .perceive import Perception, perceive
-from .mass import moving_point_masks, part_mass_properties
+from .mass import MassProperties, moving_point_masks, part_mass_properties
 from .segment import CLUSTER_VOXELS
 from .surface import obj_text, part_surface
 
@@ -237,15 +237,37 @@ def closed_form_lines(per: Perception, graph: GraphResult) -> dict[str, JointLin
     return lines
 
 
+def part_masses(per: Perception, reps: dict[str, int], labels: list[np.ndarray],
+                density: float) -> dict[str, MassProperties]:
+    """Per moving part ``p`` (its representative track ``reps[p]``), the mass properties of its
+    labelled points that move with it (:func:`.mass.moving_point_masks`,
+    :func:`.mass.part_mass_properties`), in the track's frame: they depend on the tracks, the labels
+    and ``density`` [kg/m³], not on where the joints are, so the model rebuilt on the NLP's joints
+    reuses them."""
+    tracks = per.tracks
+    clouds_t = [c.points for c in per.clouds]
+    out = {}
+    for p, k in reps.items():
+        Ts = [tracks.Ts_world_track(k)[s] if tracks.observed()[k, s] else None for s in range(tracks.times.size)]
+        own = [c.points[lab == p] for c, lab in zip(per.clouds, labels)]
+        masks = moving_point_masks(own, clouds_t, Ts, per.inlier_distance)
+        seen = [s for s, T in enumerate(Ts) if T is not None]
+        pts = np.concatenate([own[s] @ inverse(Ts[s])[:3, :3].T + inverse(Ts[s])[:3, 3] for s in seen])
+        out[p] = part_mass_properties(pts, density, p, per.voxel, np.concatenate([masks[s] for s in seen]))
+    return out
+
+
 def build_model(per: Perception, graph: GraphResult, density: float, name: str = "reconstruction",
-                lines: dict[str, JointLine] | None = None, labels: list[np.ndarray] | None = None):
+                lines: dict[str, JointLine] | None = None, labels: list[np.ndarray] | None = None,
+                masses: dict[str, MassProperties] | None = None):
     """Kinematic tree + fused points -> (ArticulatedModel, joint records, part clouds at zero,
-    meshes, point labels, mass report).  Joint records follow the reconstruction.json contract.
-    Moving links' mass properties come from :func:`.mass.part_mass_properties` on the points
-    that move with the part; the mass report gives per moving link the points kept, the volume
-    model and the mass the whole cloud's hull would have had [kg].  ``lines``:
-    the joints as world lines (default: :func:`closed_form_lines`, the graph's closed form).
-    ``labels``: :func:`point_labels` when already computed (they do not depend on ``lines``)."""
+    meshes, point labels, part masses, mass report).  Joint records follow the
+    reconstruction.json contract.  Moving links' mass properties come from :func:`part_masses`
+    (the points that move with the part); the mass report gives per moving link the points kept,
+    the volume model and the mass the whole cloud's hull would have had [kg].  ``lines``: the
+    joints as world lines (default: :func:`closed_form_lines`, the graph's closed form).
+    ``labels`` (:func:`point_labels`) and ``masses`` (:func:`part_masses`) when already computed:
+    neither depends on ``lines``."""
     tracks, tree = per.tracks, graph.best
     lines = closed_form_lines(per, graph) if lines is None else lines
     part_of = {m: p for p, members in tree.parts.items() for m in members if m in tracks.names}
@@ -276,10 +298,10 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
         })
     labels = point_labels(per, part_of) if labels is None else labels
     # every point of every time step, moved to the zero configuration and into its link frame
-    T_link_world = {}
+    T_link_world, T_link_track = {}, {}
     for p, k in reps.items():
-        T_track0_link = inverse(T_world_track0[p]) @ T_world_link0[p]
-        T_link_world[p] = [None if not tracks.observed()[k, s] else inverse(tracks.Ts_world_track(k)[s] @ T_track0_link)
+        T_link_track[p] = inverse(inverse(T_world_track0[p]) @ T_world_link0[p])
+        T_link_world[p] = [None if not tracks.observed()[k, s] else T_link_track[p] @ inverse(tracks.Ts_world_track(k)[s])
                            for s in range(tracks.times.size)]
     points_link: dict[str, list[np.ndarray]] = {p: [] for p in tree.parts}
     for s, (c, lab) in enumerate(zip(per.clouds, labels)):
@@ -290,13 +312,7 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
                 points_link[p].append(c.points[lab == p] @ T[:3, :3].T + T[:3, 3])
     # mass properties from the points that move with their part (background swept into a part's
     # label would otherwise weigh as much as the part's hull of air; see perception/mass.py)
-    keep_link: dict[str, np.ndarray | None] = {tree.root: None}
-    clouds_t = [c.points for c in per.clouds]
-    for p, k in reps.items():
-        Ts = [tracks.Ts_world_track(k)[s] if tracks.observed()[k, s] else None for s in range(tracks.times.size)]
-        masks = moving_point_masks([c.points[lab == p] for c, lab in zip(per.clouds, labels)], clouds_t, Ts,
-                                   per.inlier_distance)
-        keep_link[p] = np.concatenate([m for s, m in enumerate(masks) if T_link_world[p][s] is not None])
+    masses = part_masses(per, reps, labels, density) if masses is None else masses
     links, clouds_world, meshes = [], {}, {}
     mass_report = {}
     for p in [tree.root] + [j.child for j in tree.joints]:
@@ -307,15 +323,16 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
         if p == tree.root:
             inertial = Inertial(surf.mass, surf.com, surf.inertia)
         else:
-            mp = part_mass_properties(pts, density, p, per.voxel, keep_link[p])
-            inertial = Inertial(mp.mass, mp.com, mp.inertia)
+            mp = masses[p]
+            R, t = T_link_track[p][:3, :3], T_link_track[p][:3, 3]  # the track's frame -> the link's
+            inertial = Inertial(mp.mass, R @ mp.com + t, R @ mp.inertia @ R.T)
             mass_report[p] = {"points_kept": mp.kept, "points": mp.total, "volume_model": mp.method,
                               "mass_of_whole_cloud_hull": surf.mass}
         links.append(Link(p, inertial, (g,), (g,)))
         T = T_world_link0[p]
         clouds_world[p] = pts @ T[:3, :3].T + T[:3, 3]
     model = ArticulatedModel(name, tuple(links), tuple(joints))
-    return model, records, clouds_world, meshes, labels, mass_report
+    return model, records, clouds_world, meshes, labels, masses, mass_report
 
 
 def _filled(q: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -404,7 +421,7 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
     on its joints.  Returns build_model's first five, the ``nlp`` document (None without NLP) and
     build_model's mass report."""
     lines = closed_form_lines(per, graph)
-    model, records, clouds_world, meshes, labels, mass_report = build_model(per, graph, density, name, lines)
+    model, records, clouds_world, meshes, labels, masses, mass_report = build_model(per, graph, density, name, lines)
     if options is None or not model.movable_joints:
         return model, records, clouds_world, meshes, labels, None, mass_report
     t0 = time.perf_counter()
@@ -412,7 +429,8 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
     prepare_s = time.perf_counter() - t0
     result = refine_screws(data, options)
     new_lines = refined_lines(result, per, lines)
-    model, records, clouds_world, meshes, labels, mass_report = build_model(per, graph, density, name, new_lines, labels)
+    model, records, clouds_world, meshes, labels, _, mass_report = build_model(per, graph, density, name, new_lines,
+                                                                               labels, masses)
     model = _apply_identified(model, records, result)
     doc = {
         "enabled": True, "terms": result.terms, "iterations": result.iterations, "success": result.success,

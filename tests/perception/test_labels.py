@@ -139,3 +139,28 @@ def test_base_speckle_amid_the_floor_becomes_environment_and_the_body_on_it_stay
     assert (out[n:n + 5] == ENVIRONMENT).all()
     assert (out[n + 5:-1] == BASE).all()
     assert out[-1] == "p0" and (out[:n] == ENVIRONMENT).all()
+
+
+def test_a_parts_mass_does_not_move_with_its_joint_line(fridge):
+    """The model rebuilt on other joint lines (as after the NLP) reuses the parts' mass properties:
+    each moving part keeps its mass and its centre of mass in the world, and its inertia only turns
+    with the link frame — the same as recomputed from scratch on those lines."""
+    import dataclasses
+
+    from kinemaforge_opt.perception.reconstruct import build_model, closed_form_lines
+
+    per, graph, _ = fridge
+    lines = closed_form_lines(per, graph)
+    first = build_model(per, graph, 300.0, lines=lines)
+    model0, labels, masses = first[0], first[4], first[5]
+    moved = {n: dataclasses.replace(l, origin_world=l.origin_world + np.array([0.05, -0.03, 0.02])) for n, l in lines.items()}
+    reused = build_model(per, graph, 300.0, lines=moved, labels=labels, masses=masses)[0]
+    fresh = build_model(per, graph, 300.0, lines=moved, labels=labels)[0]
+    assert model0.movable_joints
+    for j in model0.movable_joints:
+        a, b, c = (m.link(j.child).inertial for m in (model0, reused, fresh))
+        assert b.mass == pytest.approx(a.mass, rel=1e-9) and c.mass == pytest.approx(a.mass, rel=1e-9)
+        np.testing.assert_allclose(b.com, c.com, atol=1e-9)
+        np.testing.assert_allclose(b.inertia, c.inertia, atol=1e-9)
+        # the link frame moved by the line's offset; the centre of mass stayed where it was
+        np.testing.assert_allclose(b.com - a.com, -(moved[j.name].origin_world - lines[j.name].origin_world), atol=1e-9)
