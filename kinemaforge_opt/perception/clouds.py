@@ -194,7 +194,8 @@ def downsample(points: np.ndarray, voxel: float, outliers: bool = False) -> np.n
         # a centroid is kept when its OUTLIER_MIN_NEIGHBOURS nearest others are all within the
         # radius (a k-nearest query with a distance bound: 3x cheaper than counting every
         # neighbour with query_ball_point, the same decision)
-        d = cKDTree(out).query(out, k=[OUTLIER_MIN_NEIGHBOURS + 1], distance_upper_bound=OUTLIER_RADIUS_VOXELS * voxel)[0]
+        d = cKDTree(out).query(out, k=[OUTLIER_MIN_NEIGHBOURS + 1],
+                               distance_upper_bound=OUTLIER_RADIUS_VOXELS * voxel, workers=-1)[0]
         out = out[np.isfinite(d[:, 0])]  # the nearest "neighbour" is the point itself
     return out
 

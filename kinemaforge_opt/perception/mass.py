@@ -91,7 +91,7 @@ def moving_point_masks(points_world: list[np.ndarray], clouds_world: list[np.nda
             inf = np.linalg.norm(moved - X, axis=1) > 2 * radius
             if not inf.any():
                 continue
-            d = trees[u].query(X[inf], distance_upper_bound=radius)[0]
+            d = trees[u].query(X[inf], distance_upper_bound=radius, workers=-1)[0]
             informative[inf] += 1
             occupied[inf] += np.isfinite(d)
         keep &= ~((informative > 0) & (2 * occupied >= informative))

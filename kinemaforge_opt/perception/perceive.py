@@ -219,7 +219,7 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
                 # only points in the part's bounding box, grown by the radius, can be within it
                 near = np.flatnonzero(np.all((c.points >= moved.min(axis=0) - radius)
                                              & (c.points <= moved.max(axis=0) + radius), axis=1))
-                on_part[near] |= cKDTree(moved).query(c.points[near], distance_upper_bound=radius)[0] < np.inf
+                on_part[near] |= cKDTree(moved).query(c.points[near], distance_upper_bound=radius, workers=-1)[0] < np.inf
         status[s] = np.where(on_part, np.int8(MOVING), status[s])
     stage("resegment", t0, tick=False)  # with the status of points on the parts
     return Perception(times, clouds, status, noise, voxel, proposals, _tracks(proposals, times), env, timing, cpu)

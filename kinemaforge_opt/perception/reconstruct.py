@@ -72,7 +72,7 @@ def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
             moved = p.points_at(s)
             if moved is None:
                 continue
-            d = cKDTree(moved).query(c.points, distance_upper_bound=per.inlier_distance)[0]
+            d = cKDTree(moved).query(c.points, distance_upper_bound=per.inlier_distance, workers=-1)[0]
             take = (d < best) & (st != STATIC)
             labels[take] = part_of[p.name]
             best[take] = d[take]
@@ -95,7 +95,7 @@ def _environment_by_majority(points: np.ndarray, labels: np.ndarray) -> np.ndarr
     env = labels == ENVIRONMENT
     if not base.size or not env.any() or len(points) <= MAJORITY_NEIGHBOURS:
         return labels
-    neighbours = cKDTree(points).query(points[base], MAJORITY_NEIGHBOURS + 1)[1][:, 1:]  # without itself
+    neighbours = cKDTree(points).query(points[base], MAJORITY_NEIGHBOURS + 1, workers=-1)[1][:, 1:]  # without itself
     out = labels.copy()
     out[base[env[neighbours].mean(axis=1) >= MAJORITY_SHARE]] = ENVIRONMENT
     return out
@@ -125,7 +125,7 @@ def _fill_part_hulls(points: np.ndarray, labels: np.ndarray, margin: float) -> n
         inside = np.flatnonzero(np.all(points[base] @ faces[:, :3].T + faces[:, 3] <= -margin, axis=1))
         if not inside.size:
             continue
-        d = cKDTree(part).query(points[base[inside]])[0]
+        d = cKDTree(part).query(points[base[inside]], workers=-1)[0]
         take = d < nearest[inside]
         out[base[inside[take]]] = name
         nearest[inside[take]] = d[take]
@@ -155,7 +155,7 @@ def _spread_part_labels(points: np.ndarray, labels: np.ndarray, unsettled: np.nd
     for g in np.flatnonzero(anchored & (np.bincount(group[free[idx]], minlength=n_groups) > 0)):
         members = idx[group == g]
         anchors, joined = members[on_part[members]], members[free[members]]
-        out[joined] = labels[anchors][cKDTree(points[anchors]).query(points[joined])[1]]
+        out[joined] = labels[anchors][cKDTree(points[anchors]).query(points[joined], workers=-1)[1]]
     return out
 
 
@@ -166,7 +166,7 @@ def pixel_labels(per: Perception, labels: list[np.ndarray]) -> dict[int, tuple[n
     for c, lab in zip(per.clouds, labels):
         tree = cKDTree(c.points)
         for v in c.views:
-            out[v.frame.index] = (v.pixels, lab[tree.query(v.points_world)[1]])
+            out[v.frame.index] = (v.pixels, lab[tree.query(v.points_world, workers=-1)[1]])
     return out
 
 

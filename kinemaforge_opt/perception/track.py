@@ -405,7 +405,7 @@ class Tracker:
         through (module doc: the free-space test alone does not rank poses).  ``verdicts``: the
         points' :meth:`verdicts` at s, if already made."""
         cons, viol = self.verdicts(points, s) if verdicts is None else verdicts
-        on = self.full_tree(s).query(points, distance_upper_bound=ICP_FINE_VOXELS * self.voxel)[0] < np.inf
+        on = self.full_tree(s).query(points, distance_upper_bound=ICP_FINE_VOXELS * self.voxel, workers=-1)[0] < np.inf
         return float(np.mean(cons.astype(bool) & on) - np.mean(viol))
 
     def solve_step(self, points: np.ndarray, s: int, guesses: list[np.ndarray]) -> np.ndarray | None:
@@ -542,7 +542,7 @@ class Tracker:
         in_part = np.zeros(len(cloud), dtype=bool)
         # the cloud's own copies of the points (exact at the reference step, within half a voxel
         # when the points were carried there by a track)
-        in_part[cKDTree(points).query(cloud, distance_upper_bound=0.5 * self.voxel)[0] < np.inf] = True
+        in_part[cKDTree(points).query(cloud, distance_upper_bound=0.5 * self.voxel, workers=-1)[0] < np.inf] = True
         fine = ICP_FINE_VOXELS * self.voxel
         reach_r = CLUSTER_VOXELS * self.voxel
         tested = in_part.copy()
@@ -550,7 +550,7 @@ class Tracker:
             tested |= np.abs(plane.distance(cloud)) <= fine
         part = points
         for _ in range(GROW_ROUNDS):
-            near = cKDTree(part).query(cloud, distance_upper_bound=reach_r)[0] < np.inf
+            near = cKDTree(part).query(cloud, distance_upper_bound=reach_r, workers=-1)[0] < np.inf
             cand = np.flatnonzero(near & ~tested)
             if cand.size == 0:
                 break
@@ -639,7 +639,7 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
         for p in proposals:
             moved = p.points_at(r)
             if moved is not None:
-                explained |= cKDTree(moved).query(moving, distance_upper_bound=radius)[0] < np.inf
+                explained |= cKDTree(moved).query(moving, distance_upper_bound=radius, workers=-1)[0] < np.inf
         rest = moving[~explained]
         if len(rest) < tracker.min_points:
             continue
