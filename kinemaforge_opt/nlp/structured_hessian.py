@@ -136,8 +136,8 @@ def lagrangian_hessian(t: DenseTerms) -> ca.Function:
     else:
         Hk = ca.densify(ca.hessian(lf * d + mu * W, wk)[0])
     wrench_args = [pk, fk, sk, pk1, fk1, sk1, pm, fm, sm, h]
-    f_int = ca.Function("dyn_hess", [xk, xk1, zs, *wrench_args, lf, mu], [Hk, gW], {"cse": True})
-    f_work = ca.Function("work", [xk, xk1, zs, *wrench_args], [W], {"cse": True})
+    f_int = ca.Function("dyn_hess", [xk, xk1, zs, *wrench_args, lf, mu], [Hk, gW])
+    f_work = ca.Function("work", [xk, xk1, zs, *wrench_args], [W])
 
     # --- the MX Hessian function ---------------------------------------------------------------
     w = ca.MX.sym("x", nw)
@@ -171,7 +171,7 @@ def lagrangian_hessian(t: DenseTerms) -> ca.Function:
         Esx = t.energy_fn(sx, theta)
         we = ca.vertcat(sx, zs)
         f_e = ca.Function("energy_hess", [sx, zs, nu],
-                          [ca.densify(ca.hessian(nu * Esx, we)[0]), ca.densify(ca.jacobian(Esx, we))], {"cse": True})
+                          [ca.densify(ca.hessian(nu * Esx, we)[0]), ca.densify(ca.jacobian(Esx, we))])
         win_of = np.searchsorted(np.asarray(edges), np.arange(K), side="right") - 1
         if t.energy == "soft":
             Wk = f_work.map(K)(X[:, :-1], X[:, 1:], z, *wr)
@@ -218,14 +218,14 @@ def lagrangian_hessian(t: DenseTerms) -> ca.Function:
         qv = ca.SX.sym("q", n)
         Hsym = ca.SX.sym("H", 13, 13)
         fh = ca.Function("vis_hess", [qv, zs, Hsym],
-                         [ca.densify(ca.hessian(fn(qv, theta, Hsym), ca.vertcat(qv, zs))[0])], {"cse": True})
+                         [ca.densify(ca.hessian(fn(qv, theta, Hsym), ca.vertcat(qv, zs))[0])])
         Hv = fh.map(len(frame_cols))(X[:n, list(map(int, frame_cols))], z, Hs)
         idx_v = np.array([np.concatenate([xoff + nx * int(c) + np.arange(n), zidx]) for c in frame_cols])
         add_blocks(idx_v, lfw * Hv)
 
     # parameter prior
     if t.prior is not None:
-        fp = ca.Function("prior_hess", [zs], [ca.densify(ca.hessian(t.prior.expand()(*parts), zs)[0])], {"cse": True})
+        fp = ca.Function("prior_hess", [zs], [ca.densify(ca.hessian(t.prior.expand()(*parts), zs)[0])])
         add_blocks(zidx[None, :], lfw * fp(z))
 
     # unit-axis constraints
