@@ -29,7 +29,8 @@ on a reconstruction (first argument = a folder written by `kinemaforge reconstru
   observed range; a real stop in the data shows as limit_contact); OUT/model.urdf keeps them.
 
 outputs: OUT/diagnosis.json, OUT/model.urdf, OUT/residual_time.png, OUT/residual_state.png,
-         OUT/fit_before_after.png (+ OUT/recording.csv, OUT/meshes/ on a reconstruction, and
+         OUT/fit_before_after.png, OUT/other_<k>_before_after.png per --other recording
+         (+ OUT/recording.csv, OUT/meshes/ on a reconstruction, and
          OUT/verification.json: the augmented model through the reconstruction's Drake check,
          when an effect was added)
 

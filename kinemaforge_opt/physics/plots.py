@@ -30,8 +30,25 @@ def _broken(t: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.where(gap, np.nan, y)
 
 
+def _before_after(h, names, title: str, recorded: str, path: Path) -> Path:
+    """One panel per joint: the recorded q of a :class:`~kinemaforge_opt.physics.predict.HeldOut`
+    and the nominal and augmented predictions, broken where a piece's fitted state window was cut."""
+    fig, axes = plt.subplots(len(names), 1, figsize=(9, 2.6 * len(names)), squeeze=False)
+    for k, ax in enumerate(axes[:, 0]):
+        ax.plot(h.t, h.q_rec[:, k], "k.", ms=3, label=recorded)
+        ax.plot(h.t, _broken(h.t, h.q_before[:, k]), lw=1.2, label=f"nominal (RMS {h.rms_before:.3g})")
+        ax.plot(h.t, _broken(h.t, h.q_after[:, k]), lw=1.2, label=f"augmented (RMS {h.rms_after:.3g})")
+        ax.set_ylabel(names[k])
+        ax.legend(loc="best", fontsize=8)
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.suptitle(title)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
 def plot_diagnosis(d: Diagnosis, out_dir: str | Path) -> list[Path]:
-    """Write residual_time.png, residual_state.png and fit_before_after.png; returns their paths."""
+    """Write residual_time.png, residual_state.png, fit_before_after.png (the held-out span) and
+    other_<k>_before_after.png (each further recording's prediction); returns their paths."""
     out_dir = Path(out_dir)
     nom = d.nominal_fit
     rec = nom.recording
@@ -64,16 +81,11 @@ def plot_diagnosis(d: Diagnosis, out_dir: str | Path) -> list[Path]:
     paths.append(_save(fig, out_dir / "residual_state.png"))
 
     if d.held_out is not None:
-        h = d.held_out
-        fig, axes = plt.subplots(n, 1, figsize=(9, 2.6 * n), squeeze=False)
-        for k, ax in enumerate(axes[:, 0]):
-            ax.plot(h.t, h.q_rec[:, k], "k.", ms=3, label="recorded (held out)")
-            ax.plot(h.t, _broken(h.t, h.q_before[:, k]), lw=1.2, label=f"nominal (RMS {h.rms_before:.3g})")
-            ax.plot(h.t, _broken(h.t, h.q_after[:, k]), lw=1.2, label=f"augmented (RMS {h.rms_after:.3g})")
-            ax.set_ylabel(names[k])
-            ax.legend(loc="best", fontsize=8)
-        axes[-1, 0].set_xlabel("t [s]")
-        fig.suptitle("held-out span: recorded vs simulated, before and after")
-        fig.tight_layout()
-        paths.append(_save(fig, out_dir / "fit_before_after.png"))
+        paths.append(_before_after(d.held_out, names, "held-out span: recorded vs simulated, before and after",
+                                   "recorded (held out)", out_dir / "fit_before_after.png"))
+    for k, h in enumerate(d.held_out_others):
+        if h.t.size:
+            role = "judged acceptance" if k == d.other_used_for_selection else "independent"
+            paths.append(_before_after(h, names, f"other recording {k + 1} ({role}): recorded vs predicted, "
+                                       "before and after", "recorded", out_dir / f"other_{k + 1}_before_after.png"))
     return paths

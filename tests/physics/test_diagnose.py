@@ -71,6 +71,21 @@ def test_writes_the_diagnosis_contract(friction_case, tmp_path):
         assert paths[name].stat().st_size > 1000
 
 
+def test_another_recording_is_predicted_better_and_plotted(tmp_path):
+    """A second MuJoCo recording of the same door under other strokes, given as a further
+    recording: the diagnosed model predicts it several times better than the nominal one, and the
+    report plots it (other_1_before_after.png)."""
+    effects = lambda j: (E("coulomb_friction", j, 0.3), E("viscous_damping", j, 0.2))  # noqa: E731
+    model, rec = _door_recording(effects)
+    _, other = _door_recording(effects, goals=(0.7, 0.4), seed=0)
+    d = diagnose(model, rec, other_recordings=(other,))
+    assert {e.type for e in d.effects} == {"coulomb_friction", "viscous_damping"}, d.summary()
+    h = d.held_out_others[0]
+    assert h.rms_after < h.rms_before / 3
+    paths = write_diagnosis(d, rec, tmp_path, with_drift=False)
+    assert paths["other_1_before_after"].stat().st_size > 1000
+
+
 def test_finds_a_hidden_spring_and_its_rest_position():
     model, rec = _door_recording(lambda j: (E("spring", j, 3.0, (("rest", 0.9),)),))
     d = diagnose(model, rec)
