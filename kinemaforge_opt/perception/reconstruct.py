@@ -252,7 +252,8 @@ def part_masses(per: Perception, reps: dict[str, int], labels: list[np.ndarray],
         own = [c.points[lab == p] for c, lab in zip(per.clouds, labels)]
         masks = moving_point_masks(own, clouds_t, Ts, per.inlier_distance)
         seen = [s for s, T in enumerate(Ts) if T is not None]
-        pts = np.concatenate([own[s] @ inverse(Ts[s])[:3, :3].T + inverse(Ts[s])[:3, 3] for s in seen])
+        T_track_world = {s: inverse(Ts[s]) for s in seen}
+        pts = np.concatenate([own[s] @ T_track_world[s][:3, :3].T + T_track_world[s][:3, 3] for s in seen])
         out[p] = part_mass_properties(pts, density, p, per.voxel, np.concatenate([masks[s] for s in seen]))
     return out
 

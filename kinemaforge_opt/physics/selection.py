@@ -306,9 +306,11 @@ class EffectSearch:
         model, srch = self.model, self.srch
         names = [n for j, e in effects for n in effect_parameters(model, j, e)]
         init, bounds, coefficient = {}, {}, {}
+        from_data = False  # states from the recording (see below)
         for j, e in effects:
             k = model.joint_index(j)
             carried = all(n in start.free for n in effect_parameters(model, j, e))  # values from the parent fit
+            from_data |= not carried and e in STATES_FROM_DATA
             if not carried:
                 lin = linear_init(model, j, e, start, self.r_nom, self.q_s, self.v_s, self.eps, self.v_scale)
                 first = effect_parameters(model, j, e)[0]
@@ -341,8 +343,6 @@ class EffectSearch:
         # which already follows the data: on the 10-s door 337 -> 291 IPOPT iterations, the same
         # findings on the quick discovery set.
         hf = self.fit_for(effects)
-        from_data = any(e in STATES_FROM_DATA for j, e in effects
-                        if not all(n in start.free for n in effect_parameters(model, j, e)))
         if coefficient:
             # Dry friction and stops make the fit multimodal: the new coefficients start from
             # their inverse-dynamics estimate, and only if that fit does not converge from their
