@@ -28,6 +28,7 @@ import numpy as np
 
 from ..io.sequence import CameraInfo
 from .clouds import DepthNoise, TimeCloud
+from .threads import thread_map
 
 # Two-sided test level: a 3σ band keeps 99.7 % of noise-only differences consistent.
 TEST_SIGMAS = 3.0
@@ -137,10 +138,10 @@ def motion_status(clouds: list[TimeCloud], cameras: dict[str, CameraInfo], noise
     STATIC, UNKNOWN or MOVING from free-space tests against the views of up to
     ``max_other_steps`` other time steps spread over the sequence (module doc).  Works for any
     camera motion; :func:`pixel_status` is the fast path for static cameras."""
-    status = []
     n = len(clouds)
-    for i, c in enumerate(clouds):
-        pts = c.points if points is None else points[i]
+
+    def status_of(i: int) -> np.ndarray:
+        pts = clouds[i].points if points is None else points[i]
         others = [j for j in range(n) if j != i]
         if len(others) > max_other_steps:
             others = [others[k] for k in np.unique(np.round(np.linspace(0, len(others) - 1, max_other_steps)).astype(int))]
@@ -152,5 +153,6 @@ def motion_status(clouds: list[TimeCloud], cameras: dict[str, CameraInfo], noise
                 verdict = free_space_test(pts, cam, view.frame.T_world_camera, padded_depth(view.depth), noise)
                 violated += verdict < 0
                 consistent += verdict > 0
-        status.append(verdict_status(violated, consistent))
-    return status
+        return verdict_status(violated, consistent)
+
+    return thread_map(status_of, range(n))

@@ -21,8 +21,9 @@ from ..io.tracks import PoseTracks
 from .change import MOVING, STATIC, motion_status, pixel_status
 from .clouds import (NOISE_IMAGES, VOXEL_FOOTPRINTS, DepthNoise, FrameCloud, TimeCloud, downsample,
                      estimate_depth_noise, footprint, frame_cloud, fuse, pixel_stride, static_voxel)
-from .segment import Plane, environment_planes
 from .resegment import resegment
+from .segment import Plane, environment_planes
+from .threads import thread_map
 from .track import ICP_FINE_VOXELS, Proposal, Tracker, merge_fragments, propose_and_track
 
 
@@ -117,32 +118,41 @@ def _pixel_status_views(seq: Sequence, times: np.ndarray, views: list[list[Frame
     lies within the plane band of :mod:`segment` at any range)."""
     step_of = {t: i for i, t in enumerate(times)}
     out = [list(v) for v in views]
+    wheres = []
     for cam in seq.cameras:
         where = [(i, k) for i, vs in enumerate(views) for k, v in enumerate(vs) if v.frame.camera == cam]
-        where.sort(key=lambda ik: step_of[views[ik[0]][ik[1]].frame.t])
-        stack = []
-        for i, k in where:
-            v = views[i][k]
-            d = np.full(v.depth.shape, np.nan, dtype=np.float32)
-            r, c = v.pixels[:, 0] // v.stride, v.pixels[:, 1] // v.stride
-            d[r, c] = v.depth[r, c]
-            stack.append(d)
-        stack = np.stack(stack)
-        st = pixel_status(stack, noise)
-        mean = static_depth(stack, st)
-        for (i, k), s_img in zip(where, st):
-            v = views[i][k]
-            r, c = v.pixels[:, 0] // v.stride, v.pixels[:, 1] // v.stride
-            status = s_img[r, c]
-            pts = v.points_world.copy()
-            still = status == STATIC
-            if still.any():
-                K = v.camera  # the decimated intrinsics (frame_cloud sets them)
-                z = mean[r[still], c[still]]
-                rays = np.stack([(c[still] - K.cx) / K.fx, (r[still] - K.cy) / K.fy, np.ones(z.size)], axis=1)
-                T = v.frame.T_world_camera
-                pts[still] = (rays * z[:, None]) @ T[:3, :3].T + T[:3, 3]
-            out[i][k] = dataclasses.replace(v, status=status, points_world=pts)
+        wheres.append(sorted(where, key=lambda ik: step_of[views[ik[0]][ik[1]].frame.t]))
+    for where, with_status in zip(wheres, thread_map(lambda w: _camera_status([views[i][k] for i, k in w], noise), wheres)):
+        for (i, k), v in zip(where, with_status):
+            out[i][k] = v
+    return out
+
+
+def _camera_status(views: list[FrameCloud], noise: DepthNoise) -> list[FrameCloud]:
+    """One static camera's views (in time order) with their per-pixel status, static pixels moved
+    to their temporal mean depth (see :func:`_pixel_status_views`)."""
+    stack = []
+    for v in views:
+        d = np.full(v.depth.shape, np.nan, dtype=np.float32)
+        r, c = v.pixels[:, 0] // v.stride, v.pixels[:, 1] // v.stride
+        d[r, c] = v.depth[r, c]
+        stack.append(d)
+    stack = np.stack(stack)
+    st = pixel_status(stack, noise)
+    mean = static_depth(stack, st)
+    out = []
+    for v, s_img in zip(views, st):
+        r, c = v.pixels[:, 0] // v.stride, v.pixels[:, 1] // v.stride
+        status = s_img[r, c]
+        pts = v.points_world.copy()
+        still = status == STATIC
+        if still.any():
+            K = v.camera  # the decimated intrinsics (frame_cloud sets them)
+            z = mean[r[still], c[still]]
+            rays = np.stack([(c[still] - K.cx) / K.fx, (r[still] - K.cy) / K.fy, np.ones(z.size)], axis=1)
+            T = v.frame.T_world_camera
+            pts[still] = (rays * z[:, None]) @ T[:3, :3].T + T[:3, 3]
+        out.append(dataclasses.replace(v, status=status, points_world=pts))
     return out
 
 
@@ -153,6 +163,21 @@ def perceive(seq: Sequence, progress: tqdm | None = None) -> Perception:
     products here are (N, 3) @ (3, 3), which threads only slow down (5× on a busy 2-core host)."""
     with threadpool_limits(limits=1, user_api="blas"):
         return _perceive(seq, progress)
+
+
+def _with_parts_moving(points: np.ndarray, status: np.ndarray, proposals: list[Proposal], s: int,
+                       radius: float) -> np.ndarray:
+    """(M,) ``status`` of step s's (M, 3) ``points`` with those within ``radius`` [m] of a tracked
+    part's moved points set MOVING."""
+    on_part = np.zeros(len(points), dtype=bool)
+    for p in proposals:
+        moved = p.points_at(s)
+        if moved is not None:
+            # only points in the part's bounding box, grown by the radius, can be within it
+            near = np.flatnonzero(np.all((points >= moved.min(axis=0) - radius)
+                                         & (points <= moved.max(axis=0) + radius), axis=1))
+            on_part[near] |= cKDTree(moved).query(points[near], distance_upper_bound=radius)[0] < np.inf
+    return np.where(on_part, np.int8(MOVING), status)
 
 
 def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
@@ -170,7 +195,7 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
 
     t0 = time.perf_counter()
     times = seq.times
-    depths = {f.index: seq.read_depth(f) for f in seq.frames}
+    depths = dict(zip((f.index for f in seq.frames), thread_map(seq.read_depth, seq.frames)))
     t0 = stage("load", t0, tick=False)
     if times.size < 2:
         raise DataError(f"{seq.root}: the sequence has one time step (t = {times[0]} s); motion needs at least two")
@@ -179,18 +204,20 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
     stride = pixel_stride(voxel, foot)
     pick = np.unique(np.round(np.linspace(0, len(seq.frames) - 1, min(NOISE_IMAGES, len(seq.frames)))).astype(int))
     noise = estimate_depth_noise([depths[seq.frames[i].index][::stride, ::stride] for i in pick], seq.depth_scale)
-    views = [[frame_cloud(seq, f, noise, depths[f.index], stride) for f in seq.frames_at(t)] for t in times]
+    flat = thread_map(lambda f: frame_cloud(seq, f, noise, depths[f.index], stride), seq.frames)
+    cloud_of = {f.index: c for f, c in zip(seq.frames, flat)}
+    views = [[cloud_of[f.index] for f in seq.frames_at(t)] for t in times]
     del depths
     t0 = stage("clouds", t0)
     if static_cameras(seq, times):
         views = _pixel_status_views(seq, times, views, noise)
         first = np.concatenate([v.points_world[v.status == STATIC] for v in views[0]])
         coarse = static_voxel(len(downsample(first, voxel)), voxel)
-        fused = [fuse(t, vs, voxel, coarse) for t, vs in zip(times, views)]
+        fused = thread_map(lambda tv: fuse(tv[0], tv[1], voxel, coarse), list(zip(times, views)))
         clouds = [c for c, _ in fused]
         status = [s for _, s in fused]
     else:  # moving cameras: free-space tests between time steps on the fused points
-        clouds = [fuse(t, vs, voxel)[0] for t, vs in zip(times, views)]
+        clouds = [c for c, _ in thread_map(lambda tv: fuse(tv[0], tv[1], voxel), list(zip(times, views)))]
         status = motion_status(clouds, seq.cameras, noise)
     t0 = stage("motion", t0)
     radius = ICP_FINE_VOXELS * voxel
@@ -211,15 +238,8 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
             f"noise (σ ≈ {1e3 * float(noise.sigma(1.0)):.2g} mm at 1 m); "
             "there is no joint to infer"
         )
-    for s, c in enumerate(clouds):  # points on a tracked part move with it, whatever their own test said
-        on_part = np.zeros(len(c.points), dtype=bool)
-        for p in proposals:
-            moved = p.points_at(s)
-            if moved is not None:
-                # only points in the part's bounding box, grown by the radius, can be within it
-                near = np.flatnonzero(np.all((c.points >= moved.min(axis=0) - radius)
-                                             & (c.points <= moved.max(axis=0) + radius), axis=1))
-                on_part[near] |= cKDTree(moved).query(c.points[near], distance_upper_bound=radius, workers=-1)[0] < np.inf
-        status[s] = np.where(on_part, np.int8(MOVING), status[s])
+    # points on a tracked part move with it, whatever their own test said
+    status = thread_map(lambda s: _with_parts_moving(clouds[s].points, status[s], proposals, s, radius),
+                        range(len(clouds)))
     stage("resegment", t0, tick=False)  # with the status of points on the parts
     return Perception(times, clouds, status, noise, voxel, proposals, _tracks(proposals, times), env, timing, cpu)

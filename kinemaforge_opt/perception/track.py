@@ -98,6 +98,7 @@ from ..io.sequence import CameraInfo
 from .change import MOVING, STATIC, free_space_test, padded_depth
 from .clouds import DepthNoise, TimeCloud, downsample
 from .segment import CLUSTER_VOXELS, Plane, clusters
+from .threads import thread_map
 
 # ICP correspondence radii in voxels: coarse (captures the candidate's basin), then fine.
 ICP_COARSE_VOXELS = 4.0
@@ -337,7 +338,7 @@ class Tracker:
         self.clouds, self.status, self.cameras, self.noise, self.voxel = clouds, status, cameras, noise, voxel
         self.background = background
         self.targets = [c.points[s != STATIC] for c, s in zip(clouds, status)]
-        self.trees = [cKDTree(t) if len(t) else None for t in self.targets]
+        self.trees = thread_map(lambda t: cKDTree(t) if len(t) else None, self.targets)
         self._windows: dict[int, list[np.ndarray]] = {}
         self._full_trees: dict[int, cKDTree] = {}
         self._moving_clusters: dict[int, list[np.ndarray]] = {}
@@ -556,19 +557,21 @@ class Tracker:
                 break
             tested[cand] = True
             x = cloud[cand]
-            part_score = np.zeros(cand.size, dtype=int)  # hits minus violations, per hypothesis
-            static_score = np.zeros(cand.size, dtype=int)
-            part_viol = np.zeros(cand.size, dtype=int)
-            for s in steps:
+
+            def scores(s: int) -> np.ndarray:
+                """(3, n): hits minus violations under the track and the static hypothesis, and
+                violations under the track, of the candidates at step s."""
                 T = Ts[s]
                 tree = self.full_tree(s)
                 xs = x @ T[:3, :3].T + T[:3, 3]
                 cons_p, viol_p = self.verdicts(xs, s)
                 seen = cons_p | viol_p  # compare only where the moved point can be observed
                 vs = self.verdicts(x, s)[1]
-                part_score += seen * ((tree.query(xs, distance_upper_bound=fine)[0] < np.inf).astype(int) - viol_p)
-                static_score += seen * ((tree.query(x, distance_upper_bound=fine)[0] < np.inf).astype(int) - vs)
-                part_viol += viol_p
+                return np.stack([seen * ((tree.query(xs, distance_upper_bound=fine)[0] < np.inf).astype(int) - viol_p),
+                                 seen * ((tree.query(x, distance_upper_bound=fine)[0] < np.inf).astype(int) - vs),
+                                 viol_p])
+
+            part_score, static_score, part_viol = np.sum(thread_map(scores, steps), axis=0)
             take = ((part_score > static_score) & (4 * part_viol <= len(steps))) | ((part_score == static_score) & (part_viol == 0))
             if not take.any():
                 break
@@ -583,27 +586,32 @@ def refine(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
     hinge is static by the free-space test at steps where the part rests, and without it the
     trimmed ICP slides the part off its true pose toward the part's non-static remainder."""
     fine = ICP_FINE_VOXELS * tracker.voxel
-    out = []
-    for s in range(len(tracker.clouds)):
+
+    def target(s: int) -> np.ndarray:
         pts = tracker.clouds[s].points
         keep = tracker.status[s] != STATIC
         for p in proposals:
             moved = p.points_at(s)
             if moved is not None:
                 keep |= cKDTree(moved).query(pts, distance_upper_bound=fine)[0] < np.inf
-        tracker.targets[s] = pts[keep]
-        tracker.trees[s] = cKDTree(pts[keep]) if keep.any() else None
+        return pts[keep]
+
+    tracker.targets = thread_map(target, range(len(tracker.clouds)))
+    tracker.trees = thread_map(lambda t: cKDTree(t) if len(t) else None, tracker.targets)
     rng = np.random.default_rng(0)
+    out = []
     for p in proposals:
         sample = p.points if len(p.points) <= MAX_TRACK_POINTS else p.points[rng.choice(len(p.points), MAX_TRACK_POINTS, replace=False)]
-        Ts = p.Ts_delta.copy()
-        for s in range(len(Ts)):
-            if s == p.ref or not np.all(np.isfinite(Ts[s])) or tracker.trees[s] is None:
-                continue
-            T = icp(sample, tracker.trees[s], tracker.targets[s], Ts[s], (fine,), tolerance=ICP_TOLERANCE_VOXELS * tracker.voxel)
+
+        def refined(s: int) -> np.ndarray:
+            T0 = p.Ts_delta[s]
+            if s == p.ref or not np.all(np.isfinite(T0)) or tracker.trees[s] is None:
+                return T0
+            T = icp(sample, tracker.trees[s], tracker.targets[s], T0, (fine,), tolerance=ICP_TOLERANCE_VOXELS * tracker.voxel)
             cons, viol = tracker.verify(sample @ T[:3, :3].T + T[:3, 3], s)
-            if acceptable(cons, viol):
-                Ts[s] = T
+            return T if acceptable(cons, viol) else T0
+
+        Ts = np.array(thread_map(refined, range(len(p.Ts_delta))))
         out.append(Proposal(p.name, p.ref, p.points, Ts))
     return out
 
@@ -613,12 +621,13 @@ def seed_order(tracker: Tracker) -> list[int]:
     next to each other — a fridge's two doors — are one cluster while both are closed or both
     open, and apart when only one is open), then most moving points.  Clusters are counted on
     the moving points at twice the voxel edge (a cheap preview of :func:`clusters`)."""
-    keys = []
-    for s, c in zip(tracker.status, tracker.clouds):
-        moving = c.points[s == MOVING]
+    def key(s: int) -> tuple[int, int]:
+        moving = tracker.clouds[s].points[tracker.status[s] == MOVING]
         coarse = downsample(moving, 2 * tracker.voxel)
         n = len(clusters(coarse, 2 * tracker.voxel, max(MIN_PROPOSAL_POINTS, tracker.min_points // 4))) if len(coarse) else 0
-        keys.append((-n, -len(moving)))
+        return -n, -len(moving)
+
+    keys = thread_map(key, range(len(tracker.clouds)))
     return sorted(range(len(keys)), key=lambda r: keys[r])
 
 

@@ -1,0 +1,57 @@
+"""The perception stages' thread pool: order, errors, and the same answer on one thread as on two."""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+
+import numpy as np
+import pytest
+
+from kinemaforge_opt.io.sequence import load_sequence
+from kinemaforge_opt.perception.threads import thread_map, workers
+
+
+def test_thread_map_keeps_order_and_raises_the_first_error(monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    assert workers() == 2
+    assert thread_map(lambda x: x * x, range(50)) == [x * x for x in range(50)]
+
+    def fail(x):
+        if x == 7:
+            raise ValueError("item 7 is bad")
+        return x
+
+    with pytest.raises(ValueError, match="item 7 is bad"):
+        thread_map(fail, range(20))
+
+
+def test_one_thread_when_the_batch_runner_asks_for_it(monkeypatch):
+    import threading
+
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    main = threading.get_ident()
+    assert set(thread_map(lambda _: threading.get_ident(), range(8))) == {main}
+
+
+def test_perception_is_the_same_on_one_thread_and_on_two(tmp_path, monkeypatch):
+    """The threaded stages map independent frames, steps and cameras: the clouds, statuses and
+    tracks must not depend on how many threads ran them."""
+    from kinemaforge_opt.synth import generate_case
+    from problems.catalogue import get_case
+
+    perceive = sys.modules["kinemaforge_opt.perception.perceive"].perceive
+    paths = generate_case(dataclasses.replace(get_case("tiny_door_clean"), frames=10), tmp_path / "door")
+    seq = load_sequence(paths.sequence)
+    runs = []
+    for n in ("1", "2"):
+        monkeypatch.setenv("OMP_NUM_THREADS", n)
+        runs.append(perceive(seq))
+    one, two = runs
+    assert len(one.proposals) == len(two.proposals) >= 1
+    for a, b in zip(one.proposals, two.proposals):
+        np.testing.assert_array_equal(a.points, b.points)
+        np.testing.assert_array_equal(a.Ts_delta, b.Ts_delta)
+    for ca, cb, sa, sb in zip(one.clouds, two.clouds, one.status, two.status):
+        np.testing.assert_array_equal(ca.points, cb.points)
+        np.testing.assert_array_equal(sa, sb)
