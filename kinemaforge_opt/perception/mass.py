@@ -34,6 +34,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from ..errors import DataError
+from .threads import thread_map
 
 # Informative steps compared per step (evenly spread); more costs time and changes little.
 MAX_COMPARED_STEPS = 8
@@ -71,14 +72,13 @@ def moving_point_masks(points_world: list[np.ndarray], clouds_world: list[np.nda
     if not (len(clouds_world) == len(Ts_world_part) == T):
         raise DataError(f"moving_point_masks: {T} point sets, {len(clouds_world)} clouds and "
                         f"{len(Ts_world_part)} poses; one of each per time step was expected")
-    trees = [cKDTree(c) if len(c) else None for c in clouds_world]
-    masks = []
-    for s in range(T):
+    trees = thread_map(lambda c: cKDTree(c) if len(c) else None, clouds_world)
+
+    def mask(s: int) -> np.ndarray:
         X = np.asarray(points_world[s], dtype=float).reshape(-1, 3)
         keep = np.ones(len(X), dtype=bool)
         if len(X) == 0 or Ts_world_part[s] is None:
-            masks.append(keep)
-            continue
+            return keep
         others = [u for u in range(T) if u != s and Ts_world_part[u] is not None and trees[u] is not None]
         if len(others) > MAX_COMPARED_STEPS:
             others = [others[i] for i in np.linspace(0, len(others) - 1, MAX_COMPARED_STEPS).round().astype(int)]
@@ -91,12 +91,12 @@ def moving_point_masks(points_world: list[np.ndarray], clouds_world: list[np.nda
             inf = np.linalg.norm(moved - X, axis=1) > 2 * radius
             if not inf.any():
                 continue
-            d = trees[u].query(X[inf], distance_upper_bound=radius, workers=-1)[0]
+            d = trees[u].query(X[inf], distance_upper_bound=radius)[0]
             informative[inf] += 1
             occupied[inf] += np.isfinite(d)
-        keep &= ~((informative > 0) & (2 * occupied >= informative))
-        masks.append(keep)
-    return masks
+        return keep & ~((informative > 0) & (2 * occupied >= informative))
+
+    return thread_map(mask, range(T))
 
 
 def _trim(points: np.ndarray) -> np.ndarray:

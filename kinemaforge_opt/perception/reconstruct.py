@@ -36,6 +36,7 @@ from .perceive import Perception, perceive
 from .mass import MassProperties, moving_point_masks, part_mass_properties
 from .segment import CLUSTER_VOXELS
 from .surface import obj_text, part_surface
+from .threads import thread_map
 
 BASE, ENVIRONMENT = "base", "environment"
 # A BASE point whose MAJORITY_NEIGHBOURS nearest points are at least MAJORITY_SHARE environment
@@ -56,8 +57,9 @@ def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
     (:func:`_spread_part_labels`) and over the BASE points inside its convex hull
     (:func:`_fill_part_hulls`), and a BASE point among environment points is ENVIRONMENT
     (:func:`_environment_by_majority`)."""
-    out = []
-    for s, (c, st) in enumerate(zip(per.clouds, per.status)):
+
+    def labels_at(s: int) -> np.ndarray:
+        c, st = per.clouds[s], per.status[s]
         labels = np.full(len(c.points), BASE, dtype=object)
         # the band follows the depth noise, not the voxel: 1.5 voxels is 3.5 cm at 160x120 and took
         # in a laptop lying on the floor.  Range = distance to the nearest camera (≥ the depth, so
@@ -78,8 +80,9 @@ def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
             best[take] = d[take]
         labels = _spread_part_labels(c.points, labels, st != STATIC, CLUSTER_VOXELS * per.voxel)
         labels = _fill_part_hulls(c.points, labels, per.voxel)
-        out.append(_environment_by_majority(c.points, labels))
-    return out
+        return _environment_by_majority(c.points, labels)
+
+    return thread_map(labels_at, range(len(per.clouds)))
 
 
 def _environment_by_majority(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
