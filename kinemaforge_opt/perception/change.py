@@ -40,10 +40,14 @@ MAX_OTHER_STEPS = 10
 
 
 def padded_depth(depth: np.ndarray) -> np.ndarray:
-    """(H+2, W+2) depth image [m] padded with one NaN pixel on each side (NaN = no reading): the
-    form in which :func:`free_space_test` reads each pixel's 3×3 window (nine gathers per tested
-    point, instead of stacking nine shifted copies of the whole image)."""
-    return np.pad(np.asarray(depth), 1, constant_values=np.nan)
+    """(H+2, W+2) depth image [m] padded with one pixel on each side, +inf where there is no
+    reading (NaN in the image, and the padding): the form in which :func:`free_space_test` reads
+    each pixel's 3×3 window (one gather of nine per tested point, instead of stacking nine shifted
+    copies of the whole image; with +inf for "no reading" the window's minima need no NaN
+    handling, and a missing reading is neither near a point nor in front of it)."""
+    padded = np.pad(np.asarray(depth, dtype=float), 1, constant_values=np.inf)
+    padded[np.isnan(padded)] = np.inf
+    return padded
 
 
 def free_space_test(points_world: np.ndarray, camera: CameraInfo, T_world_camera: np.ndarray,
@@ -62,14 +66,17 @@ def free_space_test(points_world: np.ndarray, camera: CameraInfo, T_world_camera
     v[front] = np.round(camera.fy * pc[front, 1] / z[front] + camera.cy).astype(int)
     inside = front & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
     idx = np.flatnonzero(inside)
-    vi, ui = v[idx], u[idx]  # the window of pixel (v, u) is padded[v:v+3, u:u+3]
-    readings = np.stack([padded[vi + i, ui + j] for i in range(3) for j in range(3)])  # (9, n)
-    seen = np.isfinite(readings).any(axis=0)
-    idx, readings = idx[seen], readings[:, seen]
+    # the window of pixel (v, u) is padded[v:v+3, u:u+3]: flat offsets from its corner
+    width = padded.shape[1]
+    window = (np.arange(3)[:, None] * width + np.arange(3)[None, :]).ravel()
+    readings = padded.ravel()[(v[idx] * width + u[idx])[:, None] + window]  # (n, 9), +inf = none
+    front_reading = readings.min(axis=1)
+    seen = front_reading < np.inf
+    idx, readings, front_reading = idx[seen], readings[seen], front_reading[seen]
     zi = z[idx]
     tau = TEST_SIGMAS * np.sqrt(2.0) * noise.sigma(zi)
-    nearest = np.nanmin(np.abs(readings - zi), axis=0)
-    out[idx[zi < np.nanmin(readings, axis=0) - tau]] = -1
+    nearest = np.abs(readings - zi[:, None]).min(axis=1)
+    out[idx[zi < front_reading - tau]] = -1
     out[idx[nearest <= tau]] = 1
     return out
 
