@@ -16,9 +16,14 @@ Y = TypeVar("Y")
 
 
 def workers() -> int:
-    """Threads to use: OMP_NUM_THREADS when set (the batch runner sets 1 per job), else the CPUs
-    this process may run on."""
-    return int(os.environ.get("OMP_NUM_THREADS") or len(os.sched_getaffinity(0)))
+    """Threads to use: OMP_NUM_THREADS when set (the batch runner sets 1 per job; of a nested
+    OpenMP list such as "4,2" the first level), else the CPUs this process may run on."""
+    first = os.environ.get("OMP_NUM_THREADS", "").split(",")[0].strip()
+    if first.isdigit() and int(first) > 0:
+        return int(first)
+    if hasattr(os, "sched_getaffinity"):  # Linux: the CPUs this process is allowed, not the machine's
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def thread_map(fn: Callable[[X], Y], items: Sequence[X]) -> list[Y]:

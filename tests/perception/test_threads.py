@@ -26,6 +26,15 @@ def test_thread_map_keeps_order_and_raises_the_first_error(monkeypatch):
         thread_map(fail, range(20))
 
 
+def test_workers_read_openmp_settings(monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", "3,2")  # a nested OpenMP list: the first level counts
+    assert workers() == 3
+    monkeypatch.setenv("OMP_NUM_THREADS", "")  # unset in effect: the CPUs this process may use
+    assert workers() >= 1
+    monkeypatch.setenv("OMP_NUM_THREADS", "0")  # not a thread count: ignored the same way
+    assert workers() >= 1
+
+
 def test_one_thread_when_the_batch_runner_asks_for_it(monkeypatch):
     import threading
 
