@@ -43,15 +43,19 @@ def test_one_thread_when_the_batch_runner_asks_for_it(monkeypatch):
     assert set(thread_map(lambda _: threading.get_ident(), range(8))) == {main}
 
 
-def test_perception_is_the_same_on_one_thread_and_on_two(tmp_path, monkeypatch):
+@pytest.mark.parametrize("case", ["tiny_door_clean", "tiny_moving"])  # static cameras; a moving camera
+def test_perception_is_the_same_on_one_thread_and_on_two(case, tmp_path, monkeypatch):
     """The threaded stages map independent frames, steps and cameras: the clouds, statuses and
-    tracks must not depend on how many threads ran them."""
+    tracks must not depend on how many threads ran them (static cameras take the per-pixel status
+    path, a moving camera the free-space tests between time steps)."""
+    from kinemaforge_opt.perception.perceive import static_cameras
     from kinemaforge_opt.synth import generate_case
     from problems.catalogue import get_case
 
     perceive = sys.modules["kinemaforge_opt.perception.perceive"].perceive
-    paths = generate_case(dataclasses.replace(get_case("tiny_door_clean"), frames=10), tmp_path / "door")
+    paths = generate_case(dataclasses.replace(get_case(case), frames=10), tmp_path / case)
     seq = load_sequence(paths.sequence)
+    assert static_cameras(seq, seq.times) == (case == "tiny_door_clean")
     runs = []
     for n in ("1", "2"):
         monkeypatch.setenv("OMP_NUM_THREADS", n)
