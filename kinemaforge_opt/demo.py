@@ -19,14 +19,16 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .calibration import Calibration, calibrate
 from .io.atomic import write_text_atomic
 from .io.recording import Recording, write_recording
-from .model import write_urdf
 from .spatial import axis_angle_error
+
+if TYPE_CHECKING:  # loaded where the joint-space demo calibrates (CasADi, the bridge)
+    from .calibration import Calibration
 
 
 @dataclass(frozen=True)
@@ -60,6 +62,8 @@ class DemoReport:
 def run_demo(out_dir: str | Path, seed: int = 0, noise_rad: float = 2e-3, rate_hz: int = 30) -> DemoReport:
     """Simulate, identify, and write ``out_dir/{model.urdf, recording.csv, calibrated.urdf,
     demo.json}``.  Deterministic for a given ``seed``."""
+    from .calibration import calibrate
+    from .model import write_urdf
     from .synth.effects import ConcealedEffect
     from .synth.groundtruth import HandPlan, simulate
     from .synth.objects import make_object

@@ -42,8 +42,9 @@ def test_reconstruct_verifies_and_view_shows_it(tmp_path, capsys):
 
 @pytest.mark.parametrize("flags,aligned", [([], True), (["--free-axes"], False)])
 def test_free_axes_switches_the_gravity_aligned_refit_off(tmp_path, monkeypatch, flags, aligned):
-    """`--free-axes` reaches the screw NLP's options (the run stops at the reconstruction)."""
-    from kinemaforge_opt.commands import reconstruct as command
+    """`--free-axes` reaches the screw NLP's options, and the default density the reconstruction
+    (the run stops at the reconstruction)."""
+    from kinemaforge_opt.perception import reconstruct as pipeline
 
     seen = {}
 
@@ -51,10 +52,11 @@ def test_free_axes_switches_the_gravity_aligned_refit_off(tmp_path, monkeypatch,
         seen.update(kwargs)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(command, "reconstruct_sequence", stop)
+    monkeypatch.setattr(pipeline, "reconstruct_sequence", stop)
     seq = tmp_path / "seq"
     seq.mkdir()
     (seq / "sequence.json").write_text("{}")
     with pytest.raises(KeyboardInterrupt):
         main(["reconstruct", str(seq), "-o", str(tmp_path / "out"), *flags])
     assert seen["nlp_options"].gravity_aligned is aligned
+    assert seen["density"] == pipeline.DEFAULT_DENSITY

@@ -8,12 +8,10 @@ import json
 from pathlib import Path
 
 from ..errors import InputFileError, KinemaforgeError
-from ..graph import infer_tree
-from ..graph.tree import GraphResult
 from ..io.atomic import write_text_atomic
-from ..io.tracks import read_sturm_log, read_tracks
-from ..nlp.reconstruction import ScrewOptions
-from ..perception.reconstruct import DEFAULT_DENSITY, reconstruct_sequence
+
+# The pipeline's modules (open3d, scipy.signal, CasADi, Pinocchio) load in `run`, not here:
+# `kinemaforge --help` and argument errors then answer in a fraction of a second.
 
 HELP = """\
 Infer the kinematic tree of an articulated object from an RGB-D sequence or from part pose
@@ -56,8 +54,9 @@ def register(subparsers) -> None:
     p.add_argument("--method", choices=("graph", "greedy"), default="graph",
                    help="'graph' (constraint graph + arborescence, default) or 'greedy' (ablation)")
     p.add_argument("--k-best", type=int, default=3, help="trees to keep (best + alternatives), default 3")
-    p.add_argument("--density", type=float, default=DEFAULT_DENSITY,
-                   help=f"part density for masses from the meshes [kg/m³] (RGB-D input), default {DEFAULT_DENSITY:g}")
+    p.add_argument("--density", type=float, default=None,
+                   help="part density for masses from the meshes [kg/m³] (RGB-D input); default "
+                        "perception.reconstruct.DEFAULT_DENSITY, 300 (hollow wood-and-board furniture)")
     nlp = p.add_argument_group("joint-inference NLP (RGB-D input; ablation switches of the seed's Table 2)")
     nlp.add_argument("--no-nlp", dest="nlp", action="store_false",
                      help="keep the closed-form joints of the graph (no screw-axis NLP)")
@@ -73,7 +72,9 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _joints(result: GraphResult, prefix: str = "") -> list[dict]:
+def _joints(result, prefix: str = "") -> list[dict]:
+    """The best tree's joints of a :class:`~kinemaforge_opt.graph.tree.GraphResult` as
+    reconstruction.json records (names prefixed with ``prefix``)."""
     out = []
     for j in result.best.joints:
         h = j.hypothesis
@@ -92,7 +93,7 @@ def _joints(result: GraphResult, prefix: str = "") -> list[dict]:
     return out
 
 
-def _alternatives(result: GraphResult) -> list[dict]:
+def _alternatives(result) -> list[dict]:
     return [
         {"log_score": t.log_score, "joints": [[j.parent, j.child, j.type] for j in t.joints]}
         for t in result.alternatives
@@ -100,6 +101,9 @@ def _alternatives(result: GraphResult) -> list[dict]:
 
 
 def run(args) -> int:
+    from ..graph import infer_tree
+    from ..io.tracks import read_sturm_log, read_tracks
+
     src: Path = args.input
     if not src.exists():
         raise InputFileError(f"input {str(src)!r} does not exist")
@@ -132,9 +136,12 @@ def run(args) -> int:
 
 
 def _run_sequence(args) -> int:
+    from ..nlp.reconstruction import ScrewOptions
+    from ..perception.reconstruct import DEFAULT_DENSITY, reconstruct_sequence
     from ..verify.reconstruction import verify_reconstruction
 
-    rec = reconstruct_sequence(args.input, args.out, method=args.method, k_best=args.k_best, density=args.density,
+    density = DEFAULT_DENSITY if args.density is None else args.density
+    rec = reconstruct_sequence(args.input, args.out, method=args.method, k_best=args.k_best, density=density,
                                nlp=args.nlp, coarse_to_fine=args.coarse_to_fine, energy=args.energy,
                                energy_weight=args.energy_weight,
                                nlp_options=ScrewOptions(gravity_aligned=args.gravity_aligned))
