@@ -5,6 +5,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
+
 HEAVY = ("casadi", "open3d", "pydrake", "yourdfpy", "trimesh", "mujoco", "kinemaforge_opt.calibration")
 
 
@@ -36,3 +38,13 @@ def test_lazy_public_names_resolve():
         assert "no_such_name" in str(e)
     else:
         raise AssertionError("an unknown attribute must raise AttributeError")
+
+
+def test_version(capsys):
+    import kinemaforge_opt
+    from kinemaforge_opt.cli import main
+
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0
+    assert capsys.readouterr().out.strip() == f"kinemaforge {kinemaforge_opt.__version__}"
