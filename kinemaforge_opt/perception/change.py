@@ -146,6 +146,8 @@ def motion_status(clouds: list[TimeCloud], cameras: dict[str, CameraInfo], noise
     ``max_other_steps`` other time steps spread over the sequence (module doc).  Works for any
     camera motion; :func:`pixel_status` is the fast path for static cameras."""
     n = len(clouds)
+    # each image padded once (it is read from up to max_other_steps other steps)
+    padded = thread_map(lambda c: [padded_depth(v.depth) for v in c.views], clouds)
 
     def status_of(i: int) -> np.ndarray:
         pts = clouds[i].points if points is None else points[i]
@@ -155,9 +157,9 @@ def motion_status(clouds: list[TimeCloud], cameras: dict[str, CameraInfo], noise
         violated = np.zeros(len(pts), dtype=int)
         consistent = np.zeros(len(pts), dtype=int)
         for j in others:
-            for view in clouds[j].views:
+            for view, window in zip(clouds[j].views, padded[j]):
                 cam = view.camera or cameras[view.frame.camera]
-                verdict = free_space_test(pts, cam, view.frame.T_world_camera, padded_depth(view.depth), noise)
+                verdict = free_space_test(pts, cam, view.frame.T_world_camera, window, noise)
                 violated += verdict < 0
                 consistent += verdict > 0
         return verdict_status(violated, consistent)

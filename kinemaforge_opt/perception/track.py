@@ -337,12 +337,16 @@ class Tracker:
                  noise: DepthNoise, voxel: float, background: tuple[Plane, ...] = ()):
         self.clouds, self.status, self.cameras, self.noise, self.voxel = clouds, status, cameras, noise, voxel
         self.background = background
-        self.targets = [c.points[s != STATIC] for c, s in zip(clouds, status)]
-        self.trees = thread_map(lambda t: cKDTree(t) if len(t) else None, self.targets)
+        self.set_targets([c.points[s != STATIC] for c, s in zip(clouds, status)])
         self._windows: dict[int, list[np.ndarray]] = {}
         self._full_trees: dict[int, cKDTree] = {}
         self._moving_clusters: dict[int, list[np.ndarray]] = {}
         self.min_points = max(MIN_PROPOSAL_POINTS, int(MIN_PART_AREA / voxel**2))
+
+    def set_targets(self, targets: list[np.ndarray]) -> None:
+        """ICP's target points per step, (M_s, 3) [m], with their KD-trees (None for an empty step)."""
+        self.targets = targets
+        self.trees = thread_map(lambda t: cKDTree(t) if len(t) else None, targets)
 
     def full_tree(self, s: int) -> cKDTree:
         """KD-tree of every fused point at step s (built on first use)."""
@@ -596,8 +600,7 @@ def refine(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
                 keep |= cKDTree(moved).query(pts, distance_upper_bound=fine)[0] < np.inf
         return pts[keep]
 
-    tracker.targets = thread_map(target, range(len(tracker.clouds)))
-    tracker.trees = thread_map(lambda t: cKDTree(t) if len(t) else None, tracker.targets)
+    tracker.set_targets(thread_map(target, range(len(tracker.clouds))))
     rng = np.random.default_rng(0)
     out = []
     for p in proposals:
