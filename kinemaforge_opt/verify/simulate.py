@@ -164,7 +164,9 @@ def simulate_at(
             simulator.AdvanceTo(ti)
         q[i] = plant.GetPositions(plant_context)
         v[i] = plant.GetVelocities(plant_context)
-        if i and t_out[i - 1] >= inputs_end and _at_rest(q[i - 1 : i + 1], v[i - 1 : i + 1]):
+        # (at least one plant step apart: between two steps a discrete state cannot change)
+        if (i and t_out[i - 1] >= inputs_end and ti - t_out[i - 1] >= DISCRETE_TIME_STEP_S
+                and _at_rest(q[i - 1 : i + 1], v[i - 1 : i + 1])):
             q[i + 1 :], v[i + 1 :] = q[i], v[i]
             break
     wall = time.perf_counter() - start
