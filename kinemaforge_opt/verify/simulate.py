@@ -95,7 +95,8 @@ def simulate_at(
     v_eps: float = V_EPS,
 ) -> Trajectory:
     """Like :func:`simulate` but sampled at the increasing times ``t_out`` (T,) [s], t_out[0] >= 0.
-    The discrete plant starts from q0 clipped into the joints' position limits."""
+    The discrete plant starts from q0 clipped into the joints' position limits.  Once the replay
+    rests past its last force sample (:func:`_at_rest`), the later outputs are that state, unstepped."""
     n = model.nq
     q0 = np.asarray(q0, dtype=float).reshape(-1)
     v0 = np.asarray(v0, dtype=float).reshape(-1)
