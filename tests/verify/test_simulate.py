@@ -190,15 +190,20 @@ class _CountingSimulator:
         return self._sim.AdvanceTo(t)
 
 
-def test_a_replay_at_rest_on_its_stop_is_not_stepped_to_the_horizon(monkeypatch):
+@pytest.fixture
+def counting_simulator(monkeypatch):
+    """The replays of :mod:`kinemaforge_opt.verify.simulate` on a :class:`_CountingSimulator`."""
+    import importlib
+
+    monkeypatch.setattr(importlib.import_module("kinemaforge_opt.verify.simulate"), "Simulator", _CountingSimulator)
+    _CountingSimulator.latest = 0.0
+    return _CountingSimulator
+
+
+def test_a_replay_at_rest_on_its_stop_is_not_stepped_to_the_horizon(counting_simulator):
     # a pendulum released at 0.5 rad above its stop at 0.3 rad falls onto it and stays: gravity
     # (4.9 N·m·sin q) holds it there, exactly at the stop and at rest, to the 50-s horizon.  Once
     # at rest (and past its last force sample: here none) the replay stops stepping.
-    import importlib
-
-    sim_module = importlib.import_module("kinemaforge_opt.verify.simulate")
-    monkeypatch.setattr(sim_module, "Simulator", _CountingSimulator)
-    _CountingSimulator.latest = 0.0
     model = pendulum(0.5)
     hinge = dataclasses.replace(model.joints[0], limits=JointLimits(0.3, 1.0))
     model = dataclasses.replace(model, joints=(hinge,))
@@ -206,19 +211,14 @@ def test_a_replay_at_rest_on_its_stop_is_not_stepped_to_the_horizon(monkeypatch)
     held = tr.t > 2.0
     np.testing.assert_allclose(tr.q[held, 0], 0.3, atol=1e-3)
     np.testing.assert_allclose(tr.v[held, 0], 0.0, atol=1e-9)
-    assert _CountingSimulator.latest < 10.0
+    assert counting_simulator.latest < 10.0
 
 
-def test_a_settling_pendulum_is_stepped_to_the_horizon(monkeypatch):
+def test_a_settling_pendulum_is_stepped_to_the_horizon(counting_simulator):
     # released at 0.2 rad with light damping it swings for tens of seconds: no output state is
     # at rest, so it is stepped the whole way, and still matches the damped small-angle decay
-    import importlib
-
-    sim_module = importlib.import_module("kinemaforge_opt.verify.simulate")
-    monkeypatch.setattr(sim_module, "Simulator", _CountingSimulator)
-    _CountingSimulator.latest = 0.0
     m, length, b = 1.0, 0.5, 0.02
     tr = simulate(pendulum(length, m, damping=b), [0.2], [0.0], 20.0, dt_out=0.05, discrete=True)
-    assert _CountingSimulator.latest == pytest.approx(20.0)
+    assert counting_simulator.latest == pytest.approx(20.0)
     envelope = 0.2 * np.exp(-b / (2 * m * length**2) * tr.t)
     assert np.abs(tr.q[-40:, 0]).max() == pytest.approx(envelope[-1], rel=0.1)
