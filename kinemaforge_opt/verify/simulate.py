@@ -183,10 +183,11 @@ def _at_rest(q: np.ndarray, v: np.ndarray) -> bool:
     """Whether two consecutive output states (2, n) of a replay are one state at rest.
 
     The plant, its joint forces and (past its last sample) the applied force are time-invariant,
-    so such a state is a fixed point of the 1 ms step map and every later output equals it: a lid
-    resting on its stop need not be stepped to the 50-s horizon (SAP, Drake's discrete solver,
-    spends ~0.1 ms per step even on one joint: 5 s of the verification).  A joint creeping
-    under smooth-sign friction, or settling towards rest, moves more than this and is stepped."""
+    so such a state is a fixed point (of the 1 ms step map; of the ODE for the continuous plant)
+    and every later output equals it: a lid resting on its stop need not be stepped to the 50-s
+    horizon (SAP, Drake's discrete solver, spends ~0.1 ms per step even on one joint: 5 s of the
+    verification).  A joint creeping under smooth-sign friction, or settling towards rest, moves
+    more than this and is stepped."""
     return bool(np.all(np.abs(np.diff(q, axis=0)) <= REST_TOLERANCE) and np.all(np.abs(v) <= REST_TOLERANCE))
 
 
