@@ -28,7 +28,7 @@ import numpy as np
 
 from ..io.sequence import CameraInfo
 from .clouds import DepthNoise, TimeCloud
-from .threads import thread_map
+from ..parallel import thread_map
 
 # Two-sided test level: a 3σ band keeps 99.7 % of noise-only differences consistent.
 TEST_SIGMAS = 3.0

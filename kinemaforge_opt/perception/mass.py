@@ -34,7 +34,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from ..errors import DataError
-from .threads import thread_map
+from ..parallel import thread_map
 
 # Informative steps compared per step (evenly spread); more costs time and changes little.
 MAX_COMPARED_STEPS = 8

@@ -23,7 +23,7 @@ from .clouds import (NOISE_IMAGES, VOXEL_FOOTPRINTS, DepthNoise, FrameCloud, Tim
                      estimate_depth_noise, footprint, frame_cloud, fuse, pixel_stride, static_voxel)
 from .resegment import resegment
 from .segment import Plane, environment_planes
-from .threads import thread_map
+from ..parallel import thread_map
 from .track import ICP_FINE_VOXELS, Proposal, Tracker, merge_fragments, propose_and_track
 
 

@@ -36,7 +36,7 @@ from .perceive import Perception, perceive
 from .mass import MassProperties, moving_point_masks, part_mass_properties
 from .segment import CLUSTER_VOXELS
 from .surface import obj_text, part_surface
-from .threads import thread_map
+from ..parallel import thread_map
 
 BASE, ENVIRONMENT = "base", "environment"
 # A BASE point whose MAJORITY_NEIGHBOURS nearest points are at least MAJORITY_SHARE environment

@@ -98,7 +98,7 @@ from ..io.sequence import CameraInfo
 from .change import MOVING, STATIC, free_space_test, padded_depth
 from .clouds import DepthNoise, TimeCloud, downsample
 from .segment import CLUSTER_VOXELS, Plane, clusters
-from .threads import thread_map
+from ..parallel import thread_map
 
 # ICP correspondence radii in voxels: coarse (captures the candidate's basin), then fine.
 ICP_COARSE_VOXELS = 4.0

@@ -211,6 +211,7 @@ def diagnose(
     segment_s: float | None = None,
     other_recordings: tuple[Recording, ...] = (),
     screen: int | None = SCREEN,
+    workers: int | None = None,
 ) -> Diagnosis:
     """Locate, explain, model and show the mismatch between ``model`` and ``recording``.
 
@@ -223,7 +224,9 @@ def diagnose(
     predictions before vs after (``Diagnosis.held_out_others``).  screen: per selection round,
     fit only this many hypotheses by NLP, those that best reduce the inverse-dynamics residual
     in a linear least-squares pre-screen (default ``SCREEN``; None: fit every hypothesis); the
-    same ranking picks the candidates tried in place of an earlier effect.
+    same ranking picks the candidates tried in place of an earlier effect.  workers: processes
+    that fit a round's hypotheses side by side (None: the CPUs this process may use, or
+    OMP_NUM_THREADS; 1: all in this process); the findings do not depend on it.
     """
     say = progress or (lambda s: None)
     rec = match_recording(model, recording)
@@ -249,7 +252,7 @@ def diagnose(
     say("fitting the nominal model" if k_dec == 1 else
         f"fitting the nominal model ({1 / srch.dt:.0f} Hz search grid, {k_dec}-sample block means)")
     search = EffectSearch(model, srch, sigma_q, sigma_s, sigma_signal, friction_smoothing(srch), candidates,
-                           segment_s, screen, other_recordings, say)
+                           segment_s, screen, other_recordings, say, workers)
     search.select(max_effects)
     search.simulation_check()
     acceptance, judged_by_held_out = search.acceptance_check(held)

@@ -13,6 +13,7 @@ from ..calibration import Calibration
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..model.pinocchio import build_pin_model, inverse_dynamics
+from ..parallel import process_map
 from ..nlp.joint_space import build_joint_space_fit, match_recording, velocity_estimate
 from .locate import THRESHOLD_SIGMA, inverse_dynamics_residual
 from .predict import HeldOut, predict_before_after, prediction_signal
@@ -246,12 +247,14 @@ class EffectSearch:
 
     sigma_q (n,): the encoder noise of one recorded sample; sigma_s (n,): the noise of the
     search grid's block means; sigma_signal (n,): the level a span's nominal prediction error
-    must pass to show signal; eps (n,): the smooth-sign width [rad/s or m/s]."""
+    must pass to show signal; eps (n,): the smooth-sign width [rad/s or m/s].  workers: processes
+    for a round's independent hypothesis fits (None: :func:`~kinemaforge_opt.parallel.workers`)."""
 
     def __init__(self, model: ArticulatedModel, srch: Recording, sigma_q: np.ndarray, sigma_s: np.ndarray,
                  sigma_signal: np.ndarray, eps: np.ndarray, candidates: tuple[str, ...], segment_s: float | None,
-                 screen: int | None, other_recordings: tuple[Recording, ...], say):
+                 screen: int | None, other_recordings: tuple[Recording, ...], say, workers: int | None = None):
         self.model, self.srch = model, srch
+        self.workers = workers
         self.sigma_q, self.sigma_s, self.sigma_signal, self.eps = sigma_q, sigma_s, sigma_signal, eps
         self.candidates, self.segment_s, self.screen = candidates, segment_s, screen
         self.other_recordings, self.say = other_recordings, say
@@ -354,6 +357,16 @@ class EffectSearch:
             if trial.success:
                 return trial
         return hf.solve(names, start=start, init=init, states_from_data=from_data, bounds=bounds)
+
+    def trials(self, hypotheses: list[list[tuple[str, str]]], start: Trial) -> list[Trial]:
+        """:meth:`trial_of` of each of ``hypotheses`` from ``start``, in forked processes on up to
+        ``workers`` cores (independent fits; see :func:`~kinemaforge_opt.parallel.process_map`).
+        The shared fits they need are built here first, so no process builds one for itself, and
+        the fits with symbolic axes go first: their Hessians cost about ten times a force law's
+        (docs/NOTES.md), and taken last they would leave one core idle while another finishes them."""
+        dear_first = sorted(range(len(hypotheses)), key=lambda i: self.fit_for(hypotheses[i]) is self.fits["base"])
+        trials = process_map(lambda i: self.trial_of(hypotheses[i], start), dear_first, self.workers)
+        return [trials[dear_first.index(i)] for i in range(len(hypotheses))]
 
     def trial_of_parent(self, effects: list[tuple[str, str]], start: Trial) -> Trial:
         """The hypothesis ``effects`` fitted from ``start``'s states and values (its other
@@ -479,7 +492,8 @@ class EffectSearch:
         rows = []
         for joint, effect in pending:
             self.say(f"testing {effect} on {joint}")
-            trial = self.trial_of(self.chosen() + [(joint, effect)], self.current)
+        trials = self.trials([self.chosen() + [je] for je in pending], self.current)
+        for (joint, effect), trial in zip(pending, trials):
             names = effect_parameters(self.model, joint, effect)
             # in units of the encoder noise of one recorded sample (not of the search grid's block
             # means, whose noise is lower): whether an effect matters does not depend on the rate
@@ -547,9 +561,10 @@ class EffectSearch:
             others = [(j, e) for j in model.joint_names for e in self.candidates
                       if (j, e) not in keep and (j, e) != self.selected[i][:2]]
             swaps = []
-            for joint, effect in self.screened(others, keep, strong_before):
+            tried = self.screened(others, keep, strong_before)
+            for joint, effect in tried:
                 self.say(f"testing {effect} on {joint} in place of {self.selected[i][1]}")
-                trial = self.trial_of(keep + [(joint, effect)], self.current)
+            for (joint, effect), trial in zip(tried, self.trials([keep + [je] for je in tried], self.current)):
                 names = effect_parameters(model, joint, effect)
                 if not trial.success or _at_bound_values(trial, names, self.nominal_z):
                     continue

@@ -1,4 +1,4 @@
-"""The perception stages' thread pool: order, errors, and the same answer on one thread as on two."""
+"""The perception stages on one thread and on two give the same answer."""
 
 from __future__ import annotations
 
@@ -9,38 +9,6 @@ import numpy as np
 import pytest
 
 from kinemaforge_opt.io.sequence import load_sequence
-from kinemaforge_opt.perception.threads import thread_map, workers
-
-
-def test_thread_map_keeps_order_and_raises_the_first_error(monkeypatch):
-    monkeypatch.setenv("OMP_NUM_THREADS", "2")
-    assert workers() == 2
-    assert thread_map(lambda x: x * x, range(50)) == [x * x for x in range(50)]
-
-    def fail(x):
-        if x == 7:
-            raise ValueError("item 7 is bad")
-        return x
-
-    with pytest.raises(ValueError, match="item 7 is bad"):
-        thread_map(fail, range(20))
-
-
-def test_workers_read_openmp_settings(monkeypatch):
-    monkeypatch.setenv("OMP_NUM_THREADS", "3,2")  # a nested OpenMP list: the first level counts
-    assert workers() == 3
-    monkeypatch.setenv("OMP_NUM_THREADS", "")  # unset in effect: the CPUs this process may use
-    assert workers() >= 1
-    monkeypatch.setenv("OMP_NUM_THREADS", "0")  # not a thread count: ignored the same way
-    assert workers() >= 1
-
-
-def test_one_thread_when_the_batch_runner_asks_for_it(monkeypatch):
-    import threading
-
-    monkeypatch.setenv("OMP_NUM_THREADS", "1")
-    main = threading.get_ident()
-    assert set(thread_map(lambda _: threading.get_ident(), range(8))) == {main}
 
 
 @pytest.mark.parametrize("case", ["tiny_door_clean", "tiny_moving"])  # static cameras; a moving camera

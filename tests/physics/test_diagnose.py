@@ -55,6 +55,18 @@ def test_finds_friction_and_damping(friction_case):
     assert after < before / 3
 
 
+def test_the_findings_do_not_depend_on_the_worker_count(friction_case):
+    """A round's hypotheses are fitted side by side in forked processes: every test, value and
+    ΔBIC must be what one process alone computes."""
+    model, rec, _ = friction_case
+    one, two = (diagnose(model, rec, workers=w) for w in (1, 2))
+    assert [(e.joint, e.type, e.value, e.delta_bic) for e in one.effects] == \
+        [(e.joint, e.type, e.value, e.delta_bic) for e in two.effects]
+    keys = ("joint", "type", "value", "delta_bic", "iterations", "swap", "removed")
+    assert [{k: t.get(k) for k in keys} for t in one.tested] == [{k: t.get(k) for k in keys} for t in two.tested]
+    assert len(one.tested) > 5
+
+
 def test_writes_the_diagnosis_contract(friction_case, tmp_path):
     model, rec, d = friction_case
     paths = write_diagnosis(d, rec, tmp_path)

@@ -1,0 +1,101 @@
+"""Independent work on both cores of the target machine: a pool of threads or of forked processes.
+
+:func:`thread_map` is for work that releases the GIL — perception's numpy on whole images and
+clouds, KD-tree queries and OpenCV's PNG decoder — and makes no copies of the clouds.
+:func:`process_map` is for work that holds it: CasADi keeps the GIL through an ``nlpsol`` call,
+so the diagnosis's independent hypothesis fits gain nothing from threads (measured), but run
+side by side in forked processes that inherit the problems already built."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import pickle
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+X = TypeVar("X")
+Y = TypeVar("Y")
+
+
+def workers() -> int:
+    """Threads to use: OMP_NUM_THREADS when set (the batch runner sets 1 per job; of a nested
+    OpenMP list such as "4,2" the first level), else the CPUs this process may run on."""
+    first = os.environ.get("OMP_NUM_THREADS", "").split(",")[0].strip()
+    if first.isdigit() and int(first) > 0:
+        return int(first)
+    if hasattr(os, "sched_getaffinity"):  # Linux: the CPUs this process is allowed, not the machine's
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def thread_map(fn: Callable[[X], Y], items: Sequence[X]) -> list[Y]:
+    """``[fn(x) for x in items]``, in order, computed on up to :func:`workers` threads (in this
+    thread when that is one or there is one item).  An exception in ``fn`` propagates."""
+    n = min(workers(), len(items))
+    if n <= 1:
+        return [fn(x) for x in items]
+    with ThreadPoolExecutor(max_workers=n) as pool:
+        return list(pool.map(fn, items))
+
+
+def process_map(fn: Callable[[X], Y], items: Sequence[X], n: int | None = None) -> list[Y]:
+    """``[fn(x) for x in items]``, in order, computed by this process and up to ``n - 1`` (default
+    :func:`workers`) forked children, which take the next item as each finishes one (items may
+    differ widely in cost).  The children are forked when called, so ``fn`` sees the caller's
+    state as it is then, and whatever ``fn`` changes in that state in a child stays there: only
+    the results (which must pickle) come back.  Runs in this process alone when there is one
+    worker or one item, or where fork is unavailable.  An exception in ``fn`` propagates."""
+    items = list(items)
+    n = min(workers() if n is None else n, len(items))
+    if n <= 1 or not hasattr(os, "fork"):
+        return [fn(x) for x in items]
+    ctx = multiprocessing.get_context("fork")
+    counter = ctx.Value("i", 0)  # the next item to take, shared by every process
+
+    def take() -> int:
+        with counter.get_lock():
+            k = counter.value
+            counter.value += 1
+        return k
+
+    def work() -> dict[int, tuple[bool, object]]:
+        done = {}
+        while (k := take()) < len(items):
+            try:
+                done[k] = (True, fn(items[k]))
+            except BaseException as e:  # noqa: BLE001 - handed to the caller, who re-raises it
+                done[k] = (False, e)
+        return done
+
+    children = []
+    for _ in range(n - 1):
+        r, w = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # child: work, send what it did, leave without running the parent's cleanup
+            os.close(r)
+            code = 0
+            try:
+                with os.fdopen(w, "wb") as f:
+                    pickle.dump(work(), f)
+            except BaseException:  # noqa: BLE001 - the parent redoes the items it does not get back
+                code = 1
+            os._exit(code)
+        os.close(w)
+        children.append((pid, r))
+    done = work()
+    for pid, r in children:
+        with os.fdopen(r, "rb") as f:
+            try:
+                done.update(pickle.load(f))
+            except (EOFError, pickle.UnpicklingError):
+                pass  # the child died or could not pickle what it did: redone below
+        os.waitpid(pid, 0)
+    out = []
+    for k in range(len(items)):
+        ok, value = done[k] if k in done else (True, fn(items[k]))
+        if not ok:
+            raise value
+        out.append(value)
+    return out
