@@ -1,21 +1,24 @@
 """Time ``diagnose`` on a 1-DOF recording and how its cost grows with the recording's length.
 
     PYTHONPATH=. .venv/bin/python -m problems.time_diagnose [CASE] [--hz 100] [--lengths 2.5 5 10 20]
-        [--repeat 1] [--profile OUT.prof] [--noise-seed 0]
+        [--repeat 1] [--workers N] [--profile OUT.prof] [--noise-seed 0]
 
 The recording is catalogue case CASE (default ``effect_door_coulomb_friction+viscous_damping``)
 simulated in MuJoCo with the benchmark's stroke plan repeated until it lasts the longest length
 (2.5 s per stroke), sampled at ``--hz`` with the benchmark's encoder noise, then cut to each
-length.  Prints per length the wall and CPU time of ``diagnose`` (the process's CPU time, so BLAS
-threads count), the samples and the effects it reported; with ``--repeat N`` each length runs N
-times and the best and median CPU are printed too (the spread of one machine's timings is often
-larger than a change being measured); with ``--profile`` the longest run is profiled by cProfile
-and the functions with the most cumulative time are printed.
+length.  Prints per length the wall and CPU time of ``diagnose`` (CPU of this process and of the
+processes it forked for the hypothesis fits, so BLAS threads and the second core count), the
+samples and the effects it reported; with ``--repeat N`` each length runs N times and the best
+and median wall and CPU are printed (the spread of one machine's timings is often larger than a
+change being measured).  ``--workers 1`` keeps every fit in this process (the default: the
+CPUs this process may use).  With ``--profile`` the longest run is profiled by cProfile (this
+process only) and the functions with the most cumulative time are printed.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
@@ -41,6 +44,12 @@ def make_recording(case_name: str, hz: int, seconds: float, noise_seed: int = 0)
     return obj.model, Recording(ep.t[keep], ep.joint_names, q[keep], tau=ep.tau[keep]), case.effects
 
 
+def _cpu_s() -> float:
+    """CPU seconds of this process and of its finished children (user + system)."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("case", nargs="?", default="effect_door_coulomb_friction+viscous_damping")
@@ -49,6 +58,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=1, help="runs per length (best and median CPU printed)")
     ap.add_argument("--profile", help="write a cProfile of the longest run here and print its top entries")
     ap.add_argument("--noise-seed", type=int, default=0)
+    ap.add_argument("--workers", type=int, help="processes for the hypothesis fits (default: the CPUs this process may use)")
     args = ap.parse_args(argv)
     from kinemaforge_opt.physics.diagnose import diagnose
 
@@ -62,18 +72,21 @@ def main(argv=None) -> int:
 
             prof = cProfile.Profile()
             prof.enable()
-        cpus = []
+        walls, cpus = [], []
         for _ in range(max(args.repeat, 1)):
-            w0, c0 = time.perf_counter(), time.process_time()
-            d = diagnose(model, rec)
-            wall, cpu = time.perf_counter() - w0, time.process_time() - c0
-            cpus.append(cpu)
+            w0, c0 = time.perf_counter(), _cpu_s()
+            d = diagnose(model, rec, workers=args.workers)
+            walls.append(time.perf_counter() - w0)
+            cpus.append(_cpu_s() - c0)
         if prof is not None:
             prof.disable()
             prof.dump_stats(args.profile)
         found = ", ".join(f"{e.type}={e.value:.4g}" for e in d.effects) or "nothing"
-        spread = f" (best {min(cpus):.2f}, median {float(np.median(cpus)):.2f} of {len(cpus)})" if len(cpus) > 1 else ""
-        print(f"{seconds:5.1f} s, {rec.t.size:5d} samples: {wall:6.2f} s wall, {cpu:6.2f} s CPU{spread}; found {found}")
+        def stat(x: list[float]) -> str:
+            return f"best {min(x):5.2f}, median {float(np.median(x)):5.2f}" if len(x) > 1 else f"{x[0]:5.2f}"
+
+        print(f"{seconds:5.1f} s, {rec.t.size:5d} samples: wall {stat(walls)} s, CPU {stat(cpus)} s"
+              f"{f' ({len(walls)} runs)' if len(walls) > 1 else ''}; found {found}")
     if args.profile:
         import pstats
 
