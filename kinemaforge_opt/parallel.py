@@ -30,6 +30,13 @@ def workers() -> int:
     return os.cpu_count() or 1
 
 
+def cpu_seconds() -> float:
+    """CPU seconds [s] used so far by this process (all its threads) and by its children that have
+    finished (e.g. :func:`process_map`'s), user and system time."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
 def thread_map(fn: Callable[[X], Y], items: Sequence[X]) -> list[Y]:
     """``[fn(x) for x in items]``, in order, computed on up to :func:`workers` threads (in this
     thread when that is one or there is one item).  An exception in ``fn`` propagates."""

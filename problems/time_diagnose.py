@@ -18,10 +18,11 @@ process only) and the functions with the most cumulative time are printed.
 from __future__ import annotations
 
 import argparse
-import os
 import time
 
 import numpy as np
+
+from kinemaforge_opt.parallel import cpu_seconds
 
 
 def make_recording(case_name: str, hz: int, seconds: float, noise_seed: int = 0):
@@ -42,12 +43,6 @@ def make_recording(case_name: str, hz: int, seconds: float, noise_seed: int = 0)
     q = ep.q + np.random.default_rng(noise_seed).normal(0.0, NOISE, ep.q.shape)
     keep = ep.t <= ep.t[0] + seconds + 1e-9
     return obj.model, Recording(ep.t[keep], ep.joint_names, q[keep], tau=ep.tau[keep]), case.effects
-
-
-def _cpu_s() -> float:
-    """CPU seconds of this process and of its finished children (user + system)."""
-    t = os.times()
-    return t.user + t.system + t.children_user + t.children_system
 
 
 def main(argv=None) -> int:
@@ -74,10 +69,10 @@ def main(argv=None) -> int:
             prof.enable()
         walls, cpus = [], []
         for _ in range(max(args.repeat, 1)):
-            w0, c0 = time.perf_counter(), _cpu_s()
+            w0, c0 = time.perf_counter(), cpu_seconds()
             d = diagnose(model, rec, workers=args.workers)
             walls.append(time.perf_counter() - w0)
-            cpus.append(_cpu_s() - c0)
+            cpus.append(cpu_seconds() - c0)
         if prof is not None:
             prof.disable()
             prof.dump_stats(args.profile)

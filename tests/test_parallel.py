@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from kinemaforge_opt.parallel import process_map, thread_map, workers
+from kinemaforge_opt.parallel import cpu_seconds, process_map, thread_map, workers
 
 
 def test_thread_map_keeps_order_and_raises_the_first_error(monkeypatch):
@@ -84,3 +84,16 @@ def test_process_map_redoes_the_items_of_a_child_that_died():
 def test_process_map_on_one_worker_stays_in_this_process(monkeypatch):
     monkeypatch.setenv("OMP_NUM_THREADS", "1")
     assert set(process_map(lambda _: os.getpid(), range(5))) == {os.getpid()}
+
+
+def test_cpu_seconds_count_the_forked_children():
+    def busy(_):  # 0.15 s of CPU, wherever it runs
+        end = time.process_time() + 0.15
+        while time.process_time() < end:
+            pass
+        return os.getpid()
+
+    c0 = cpu_seconds()
+    pids = process_map(busy, range(6), n=2)
+    assert len(set(pids)) == 2
+    assert cpu_seconds() - c0 >= 0.85  # 6 x 0.15 s, the child's share included
