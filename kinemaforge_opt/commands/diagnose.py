@@ -65,6 +65,10 @@ def register(sub) -> None:
     p.add_argument("--other", nargs="*", default=(), metavar="CSV",
                    help="further recordings of the same system: compared before/after; under model-form error "
                         "the first one with signal also judges acceptance (see below)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="processes that fit a selection round's hypotheses side by side (default: the CPUs "
+                        "this process may use, or OMP_NUM_THREADS; 1: all in this process); the findings do "
+                        "not depend on it")
     p.set_defaults(func=run)
 
 
@@ -100,7 +104,7 @@ def run(args) -> int:
     for other in others:
         match_recording(model, other)
     d = diagnose(model, rec, holdout_fraction=args.holdout, progress=progress, segment_s=args.segment,
-                 other_recordings=others, max_effects=args.max_effects or MAX_EFFECTS)
+                 other_recordings=others, max_effects=args.max_effects or MAX_EFFECTS, workers=args.workers)
     bar.close()
     if reconstructed:
         import dataclasses

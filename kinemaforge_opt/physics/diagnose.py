@@ -233,6 +233,8 @@ def diagnose(
     unknown = [c for c in candidates if c not in CANDIDATES]
     if unknown:
         raise DataError(f"unknown candidate effect(s) {unknown}; available: {', '.join(CANDIDATES)}")
+    if workers is not None and workers < 1:
+        raise DataError(f"workers={workers}: the hypothesis fits need at least one process")
     rec = before_nominal_stops(model, rec)
     split = int(round(rec.t.size * (1 - holdout_fraction)))
     if split < 10:

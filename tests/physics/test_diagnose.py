@@ -116,12 +116,17 @@ def test_bad_input_is_named(friction_case, tmp_path):
     model, rec, _ = friction_case
     with pytest.raises(DataError, match="unknown candidate effect"):
         diagnose(model, rec, candidates=("magic",))
+    with pytest.raises(DataError, match="workers=0"):
+        diagnose(model, rec, workers=0)
     short = Recording(rec.t[:8], rec.joint_names, rec.q[:8])
     with pytest.raises(DataError, match="too few"):
         diagnose(model, short)
     write_urdf(model, tmp_path / "m.urdf")
     write_recording(tmp_path / "r.csv", Recording(rec.t, ("elbow",), rec.q))
     assert cli_main(["diagnose", str(tmp_path / "m.urdf"), str(tmp_path / "r.csv"), "-o", str(tmp_path / "o")]) == 2
+    write_recording(tmp_path / "ok.csv", rec)
+    assert cli_main(["diagnose", str(tmp_path / "m.urdf"), str(tmp_path / "ok.csv"), "-o", str(tmp_path / "o"),
+                     "--workers", "0"]) == 2
 
 
 def test_noise_at_rest_on_a_stop_is_not_reaching_it():
