@@ -11,6 +11,8 @@ from __future__ import annotations
 import multiprocessing
 import os
 import pickle
+import signal
+import sys
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
@@ -20,7 +22,7 @@ Y = TypeVar("Y")
 
 
 def workers() -> int:
-    """Threads to use: OMP_NUM_THREADS when set (the batch runner sets 1 per job; of a nested
+    """Threads or processes to use: OMP_NUM_THREADS when set (the batch runner sets 1 per job; of a nested
     OpenMP list such as "4,2" the first level), else the CPUs this process may run on."""
     first = os.environ.get("OMP_NUM_THREADS", "").split(",")[0].strip()
     if first.isdigit() and int(first) > 0:
@@ -72,26 +74,37 @@ def process_map(fn: Callable[[X], Y], items: Sequence[X], n: int | None = None) 
         while (k := take()) < len(items):
             try:
                 done[k] = (True, fn(items[k]))
-            except BaseException as e:  # noqa: BLE001 - handed to the caller, who re-raises it
+            except Exception as e:  # handed to the caller, who raises it in item order
                 done[k] = (False, e)
         return done
 
+    sys.stdout.flush()  # else a child would print the caller's pending output again
+    sys.stderr.flush()
     children = []
     for _ in range(n - 1):
         r, w = os.pipe()
         pid = os.fork()
-        if pid == 0:  # child: work, send what it did, leave without running the parent's cleanup
+        if pid == 0:  # child: work, send what it did, leave without running the caller's cleanup
             os.close(r)
             code = 0
             try:
                 with os.fdopen(w, "wb") as f:
                     pickle.dump(work(), f)
-            except BaseException:  # noqa: BLE001 - the parent redoes the items it does not get back
+            except BaseException:  # noqa: BLE001 - the caller redoes the items it does not get back
                 code = 1
+            sys.stdout.flush()
+            sys.stderr.flush()
             os._exit(code)
         os.close(w)
         children.append((pid, r))
-    done = work()
+    try:
+        done = work()
+    except BaseException:  # e.g. KeyboardInterrupt: no child outlives the call
+        for pid, r in children:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            os.close(r)
+        raise
     for pid, r in children:
         with os.fdopen(r, "rb") as f:
             try:

@@ -97,3 +97,18 @@ def test_cpu_seconds_count_the_forked_children():
     pids = process_map(busy, range(6), n=2)
     assert len(set(pids)) == 2
     assert cpu_seconds() - c0 >= 0.85  # 6 x 0.15 s, the child's share included
+
+
+def test_an_interrupt_in_this_process_leaves_no_child_behind():
+    parent = os.getpid()
+
+    def interrupted(x):
+        time.sleep(0.02)
+        if os.getpid() == parent and x >= 2:
+            raise KeyboardInterrupt  # Ctrl-C while this process works on its share
+        return x
+
+    with pytest.raises(KeyboardInterrupt):
+        process_map(interrupted, range(40), n=2)
+    with pytest.raises(ChildProcessError):  # the child was stopped and reaped
+        os.waitpid(-1, os.WNOHANG)

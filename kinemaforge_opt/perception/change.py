@@ -27,8 +27,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..io.sequence import CameraInfo
-from .clouds import DepthNoise, TimeCloud
 from ..parallel import thread_map
+from .clouds import DepthNoise, TimeCloud
 
 # Two-sided test level: a 3σ band keeps 99.7 % of noise-only differences consistent.
 TEST_SIGMAS = 3.0

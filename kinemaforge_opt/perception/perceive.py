@@ -18,12 +18,12 @@ from ..errors import DataError
 from ..graph.motion import MIN_SAMPLES, noise_sigma
 from ..io.sequence import Sequence
 from ..io.tracks import PoseTracks
+from ..parallel import thread_map
 from .change import MOVING, STATIC, motion_status, pixel_status
 from .clouds import (NOISE_IMAGES, VOXEL_FOOTPRINTS, DepthNoise, FrameCloud, TimeCloud, downsample,
                      estimate_depth_noise, footprint, frame_cloud, fuse, pixel_stride, static_voxel)
 from .resegment import resegment
 from .segment import Plane, environment_planes
-from ..parallel import thread_map
 from .track import ICP_FINE_VOXELS, Proposal, Tracker, merge_fragments, propose_and_track
 
 

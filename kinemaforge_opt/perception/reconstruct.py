@@ -30,13 +30,13 @@ from ..io.tracks import PoseTracks
 from ..model import ArticulatedModel, Geometry, Inertial, Joint, JointLimits, Link, write_urdf
 from ..nlp.reconstruction import ScrewData, ScrewOptions, ScrewResult, refine_screws, with_ratios
 from ..nlp.visual import surface_model
+from ..parallel import thread_map
 from ..spatial import inverse, make_transform
 from .change import STATIC, TEST_SIGMAS
 from .perceive import Perception, perceive
 from .mass import MassProperties, moving_point_masks, part_mass_properties
 from .segment import CLUSTER_VOXELS
 from .surface import obj_text, part_surface
-from ..parallel import thread_map
 
 BASE, ENVIRONMENT = "base", "environment"
 # A BASE point whose MAJORITY_NEIGHBOURS nearest points are at least MAJORITY_SHARE environment

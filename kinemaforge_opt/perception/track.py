@@ -95,10 +95,10 @@ from scipy.optimize import minimize_scalar
 from scipy.spatial import cKDTree
 
 from ..io.sequence import CameraInfo
+from ..parallel import thread_map
 from .change import MOVING, STATIC, free_space_test, padded_depth
 from .clouds import DepthNoise, TimeCloud, downsample
 from .segment import CLUSTER_VOXELS, Plane, clusters
-from ..parallel import thread_map
 
 # ICP correspondence radii in voxels: coarse (captures the candidate's basin), then fine.
 ICP_COARSE_VOXELS = 4.0

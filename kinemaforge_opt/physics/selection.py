@@ -13,8 +13,8 @@ from ..calibration import Calibration
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..model.pinocchio import build_pin_model, inverse_dynamics
-from ..parallel import process_map
 from ..nlp.joint_space import build_joint_space_fit, match_recording, velocity_estimate
+from ..parallel import process_map
 from .locate import THRESHOLD_SIGMA, inverse_dynamics_residual
 from .predict import HeldOut, predict_before_after, prediction_signal
 from .prescreen import limit_stop_guess, linear_init, screen_scores
