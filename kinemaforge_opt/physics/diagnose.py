@@ -226,7 +226,9 @@ def diagnose(
     in a linear least-squares pre-screen (default ``SCREEN``; None: fit every hypothesis); the
     same ranking picks the candidates tried in place of an earlier effect.  workers: processes
     that fit a round's hypotheses side by side (None: the CPUs this process may use, or
-    OMP_NUM_THREADS; 1: all in this process); the findings do not depend on it.
+    OMP_NUM_THREADS; 1: all in this process); the findings do not depend on it.  More than one
+    forks this process (only the calling thread lives on in a child): pass 1 from a program whose
+    other threads may be inside CasADi or hold a lock the fits need while this runs.
     """
     say = progress or (lambda s: None)
     rec = match_recording(model, recording)
