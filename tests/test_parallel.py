@@ -48,7 +48,7 @@ def test_process_map_keeps_order_and_uses_a_second_process(monkeypatch):
     monkeypatch.setenv("OMP_NUM_THREADS", "2")
 
     def slow_square(x):  # slow enough that the forked child takes some of the items
-        time.sleep(0.02)
+        time.sleep(0.05)
         return x * x, os.getpid()
 
     out = process_map(slow_square, range(12))
