@@ -60,7 +60,7 @@ def test_process_map_raises_the_error_of_an_item_done_in_a_child(monkeypatch):
     parent = os.getpid()
 
     def fail_in_child(x):
-        time.sleep(0.02)
+        time.sleep(0.05)
         if os.getpid() != parent:
             raise ValueError(f"item {x} is bad")
         return x
@@ -73,7 +73,7 @@ def test_process_map_redoes_the_items_of_a_child_that_died():
     parent = os.getpid()
 
     def die_in_child(x):
-        time.sleep(0.02)
+        time.sleep(0.05)
         if os.getpid() != parent:
             os._exit(3)  # a crash: nothing comes back from this child
         return -x
