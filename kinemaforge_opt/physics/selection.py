@@ -354,7 +354,8 @@ class EffectSearch:
             # estimate start: 134 of 145 pairs alike, 5 better from the estimate, 4 where only
             # the off start converged.)
             trial = hf.solve(names, start=start, init={**init, **coefficient}, states_from_data=from_data, bounds=bounds)
-            if trial.success:
+            if trial.success or trial.status == "Maximum_CpuTime_Exceeded":
+                # a hypothesis that used up its CPU budget gets no second one
                 return trial
         return hf.solve(names, start=start, init=init, states_from_data=from_data, bounds=bounds)
 

@@ -67,6 +67,31 @@ def test_the_findings_do_not_depend_on_the_worker_count(friction_case):
     assert len(one.tested) > 5
 
 
+def test_a_hypothesis_that_used_up_its_cpu_budget_gets_no_second_start(friction_case, monkeypatch):
+    """Dry friction is fitted from its inverse-dynamics estimate and, if that does not converge,
+    again from "off" — but not when the first solve stopped on its CPU cap (on a 20-s door the
+    Stribeck-only fit did so from both starts, 2 s spent on an unsupported hypothesis)."""
+    from kinemaforge_opt.physics.search import HypothesisFit
+
+    model, rec, _ = friction_case
+    solve = HypothesisFit.solve
+    solved = []
+
+    def capped_stribeck(self, free, *args, **kwargs):
+        trial = solve(self, free, *args, **kwargs)
+        solved.append(tuple(free))
+        if any(n.endswith(".stribeck") for n in free):
+            trial = dataclasses.replace(trial, success=False, status="Maximum_CpuTime_Exceeded")
+        return trial
+
+    monkeypatch.setattr(HypothesisFit, "solve", capped_stribeck)
+    d = diagnose(model, rec, workers=1)
+    stribeck = [k for k, free in enumerate(solved) if any(n.endswith(".stribeck") for n in free)]
+    assert stribeck  # the hypothesis was tried ...
+    assert all(solved[k + 1] != solved[k] for k in stribeck if k + 1 < len(solved))  # ... once per test
+    assert "stribeck_friction" not in {e.type for e in d.effects}
+
+
 def test_writes_the_diagnosis_contract(friction_case, tmp_path):
     model, rec, d = friction_case
     paths = write_diagnosis(d, rec, tmp_path)
