@@ -31,6 +31,8 @@ from .effects import EFFECTS
 # 1 s.  Converging fits need 5-40 iterations of about one evaluation each on long recordings; a
 # fit that spends more is in a restoration phase or ill-conditioned (a Stribeck speed near zero).
 CPU_CAP_EVALUATIONS = 100
+# IPOPT's return status of a solve stopped by that budget.
+CPU_CAP_STATUS = "Maximum_CpuTime_Exceeded"
 
 
 def effect_parameters(model: ArticulatedModel, joint: str, effect: str) -> list[str]:

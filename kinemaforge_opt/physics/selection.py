@@ -18,7 +18,7 @@ from ..parallel import process_map
 from .locate import THRESHOLD_SIGMA, inverse_dynamics_residual
 from .predict import HeldOut, predict_before_after, prediction_signal
 from .prescreen import limit_stop_guess, linear_init, screen_scores
-from .search import HypothesisFit, Trial, effect_parameters
+from .search import CPU_CAP_STATUS, HypothesisFit, Trial, effect_parameters
 
 DELTA_BIC = -10.0
 
@@ -354,7 +354,7 @@ class EffectSearch:
             # estimate start: 134 of 145 pairs alike, 5 better from the estimate, 4 where only
             # the off start converged.)
             trial = hf.solve(names, start=start, init={**init, **coefficient}, states_from_data=from_data, bounds=bounds)
-            if trial.success or trial.status == "Maximum_CpuTime_Exceeded":
+            if trial.success or trial.status == CPU_CAP_STATUS:
                 # a hypothesis that used up its CPU budget gets no second one
                 return trial
         return hf.solve(names, start=start, init=init, states_from_data=from_data, bounds=bounds)

@@ -71,7 +71,7 @@ def test_a_hypothesis_that_used_up_its_cpu_budget_gets_no_second_start(friction_
     """Dry friction is fitted from its inverse-dynamics estimate and, if that does not converge,
     again from "off" — but not when the first solve stopped on its CPU cap (on a 20-s door the
     Stribeck-only fit did so from both starts, 2 s spent on an unsupported hypothesis)."""
-    from kinemaforge_opt.physics.search import HypothesisFit
+    from kinemaforge_opt.physics.search import CPU_CAP_STATUS, HypothesisFit
 
     model, rec, _ = friction_case
     solve = HypothesisFit.solve
@@ -81,7 +81,7 @@ def test_a_hypothesis_that_used_up_its_cpu_budget_gets_no_second_start(friction_
         trial = solve(self, free, *args, **kwargs)
         solved.append(tuple(free))
         if any(n.endswith(".stribeck") for n in free):
-            trial = dataclasses.replace(trial, success=False, status="Maximum_CpuTime_Exceeded")
+            trial = dataclasses.replace(trial, success=False, status=CPU_CAP_STATUS)
         return trial
 
     monkeypatch.setattr(HypothesisFit, "solve", capped_stribeck)
