@@ -45,12 +45,19 @@ def make_recording(case_name: str, hz: int, seconds: float, noise_seed: int = 0)
     return obj.model, Recording(ep.t[keep], ep.joint_names, q[keep], tau=ep.tau[keep]), case.effects
 
 
+def _spread(seconds: list[float]) -> str:
+    """"best B, median M" of repeated timings [s], or the one timing."""
+    if len(seconds) == 1:
+        return f"{seconds[0]:5.2f}"
+    return f"best {min(seconds):5.2f}, median {float(np.median(seconds)):5.2f}"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("case", nargs="?", default="effect_door_coulomb_friction+viscous_damping")
     ap.add_argument("--hz", type=int, default=100)
     ap.add_argument("--lengths", type=float, nargs="+", default=[10.0])
-    ap.add_argument("--repeat", type=int, default=1, help="runs per length (best and median CPU printed)")
+    ap.add_argument("--repeat", type=int, default=1, help="runs per length (best and median wall and CPU printed)")
     ap.add_argument("--profile", help="write a cProfile of the longest run here and print its top entries")
     ap.add_argument("--noise-seed", type=int, default=0)
     ap.add_argument("--workers", type=int, help="processes for the hypothesis fits (default: the CPUs this process may use)")
@@ -77,10 +84,7 @@ def main(argv=None) -> int:
             prof.disable()
             prof.dump_stats(args.profile)
         found = ", ".join(f"{e.type}={e.value:.4g}" for e in d.effects) or "nothing"
-        def stat(x: list[float]) -> str:
-            return f"best {min(x):5.2f}, median {float(np.median(x)):5.2f}" if len(x) > 1 else f"{x[0]:5.2f}"
-
-        print(f"{seconds:5.1f} s, {rec.t.size:5d} samples: wall {stat(walls)} s, CPU {stat(cpus)} s"
+        print(f"{seconds:5.1f} s, {rec.t.size:5d} samples: wall {_spread(walls)} s, CPU {_spread(cpus)} s"
               f"{f' ({len(walls)} runs)' if len(walls) > 1 else ''}; found {found}")
     if args.profile:
         import pstats

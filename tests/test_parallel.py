@@ -42,8 +42,6 @@ def test_one_thread_when_the_batch_runner_asks_for_it(monkeypatch):
     assert set(thread_map(lambda _: threading.get_ident(), range(8))) == {main}
 
 
-
-
 def test_process_map_keeps_order_and_uses_a_second_process(monkeypatch):
     monkeypatch.setenv("OMP_NUM_THREADS", "2")
 
