@@ -10,7 +10,7 @@ torque at 1 kHz with sensor noise -> fit IDIM-LS and ``calibrate(method="inverse
 (embedded with :func:`.embedding.embed`) on the first 75 % -> held-out torque RMS on the last
 25 % and on a second, different trajectory -> computed-torque tracking RMS of the second
 trajectory on the real arm with each model as the inverse dynamics.  Used by
-``examples/08_arm_calibration.py`` and ``kinemaforge bench``.
+``examples/04_arm_calibration.py`` and ``kinemaforge bench``.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ held-out torque prediction on the last quarter of the excitation and on a second
 computed-torque tracking of the second trajectory with each model.  Prints tables, writes
 recordings and two PNGs.  Headless.
 
-    PYTHONPATH=. .venv/bin/python examples/08_arm_calibration.py [-o OUT] [--quick]
+    PYTHONPATH=. .venv/bin/python examples/04_arm_calibration.py [-o OUT] [--quick]
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from kinemaforge_opt.arm.side_by_side import HELD_OUT, MODELS, compare_arm_model
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("-o", "--out", type=Path, default=Path("out/08_arm_calibration"))
+    ap.add_argument("-o", "--out", type=Path, default=Path("out/04_arm_calibration"))
     ap.add_argument("--quick", action="store_true", help="short excitation design and recordings")
     args = ap.parse_args()
     res = compare_arm_models(args.quick, args.out)
