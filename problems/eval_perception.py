@@ -68,11 +68,13 @@ def ground_truth(case_root: str | Path) -> Truth:
 
 
 def _confusion(per: Perception, graph: GraphResult, truth: Truth) -> tuple[dict, list[str], list[str]]:
-    """Pixel counts {(predicted part, true label name): n} over every kept pixel of every frame."""
+    """Pixel counts {(predicted part, true label name): n} over every kept pixel of every frame
+    (:func:`pixel_labels` with the sequence's RGB images)."""
     tree = graph.best
     part_of = {m: p for p, members in tree.parts.items() for m in members if m in per.tracks.names}
     frames = [v.frame for c in per.clouds for v in c.views]
-    C, preds, trues = label_confusion(truth.root, frames, pixel_labels(per, point_labels(per, part_of)))
+    seq = load_sequence(truth.root / "sequence")
+    C, preds, trues = label_confusion(truth.root, frames, pixel_labels(per, point_labels(per, part_of), seq))
     counts = {(a, b): int(C[i, j]) for i, a in enumerate(preds) for j, b in enumerate(trues) if C[i, j]}
     return counts, sorted({a for a, _ in counts}), sorted({b for _, b in counts})
 

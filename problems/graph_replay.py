@@ -41,7 +41,7 @@ def dump(case_root: Path, out: Path) -> None:
     cpu = time.process_time() - c0
     own = {n: n for n in per.tracks.names}
     frames = [v.frame for c in per.clouds for v in c.views]
-    C, preds, trues = label_confusion(case_root, frames, pixel_labels(per, point_labels(per, own)))
+    C, preds, trues = label_confusion(case_root, frames, pixel_labels(per, point_labels(per, own), seq))
     counts = {p: {t: int(C[i, j]) for j, t in enumerate(trues) if C[i, j]} for i, p in enumerate(preds)}
     out.mkdir(parents=True, exist_ok=True)
     write_tracks(out / "tracks.csv", per.tracks)

@@ -359,7 +359,7 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
             rec["truth_verification_error"] = f"{type(e).__name__}: {e}"
 
     seq = load_sequence(case_root / "sequence")
-    counts, pred_names, true_names = label_confusion(case_root, seq.frames, pixel_labels(r.perception, r.labels))
+    counts, pred_names, true_names = label_confusion(case_root, seq.frames, pixel_labels(r.perception, r.labels, seq))
     m = part_iou_from_counts(counts, pred_names, true_names, pred_ignore=(ENVIRONMENT,),
                              true_ignore=("nothing", "environment"))
     est = [JointRecord(j["name"], j["type"], j["parent"], j["child"], np.asarray(j["axis_world"], float),

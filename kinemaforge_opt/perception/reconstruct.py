@@ -33,6 +33,7 @@ from ..nlp.visual import surface_model
 from ..parallel import thread_map
 from ..spatial import inverse, make_transform
 from .change import STATIC, TEST_SIGMAS
+from .colour import relabel_contact_by_colour
 from .perceive import Perception, perceive
 from .mass import MassProperties, moving_point_masks, part_mass_properties
 from .segment import CLUSTER_VOXELS
@@ -162,15 +163,23 @@ def _spread_part_labels(points: np.ndarray, labels: np.ndarray, unsettled: np.nd
     return out
 
 
-def pixel_labels(per: Perception, labels: list[np.ndarray]) -> dict[int, tuple[np.ndarray, np.ndarray]]:
-    """Frame index -> ((N, 2) kept pixel (row, column) indices, (N,) part names), each kept pixel
-    taking the label of its nearest fused point."""
-    out = {}
-    for c, lab in zip(per.clouds, labels):
-        tree = cKDTree(c.points)
-        for v in c.views:
-            out[v.frame.index] = (v.pixels, lab[tree.query(v.points_world, workers=-1)[1]])
-    return out
+def pixel_labels(per: Perception, labels: list[np.ndarray], seq=None) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Frame index -> ((N, 2) kept pixel (row, column) indices, (N,) part names): each kept pixel
+    takes the label of its nearest fused point (``labels``: :func:`point_labels`).  With ``seq``
+    (the Sequence, for its RGB images), environment pixels next to the object are then decided by
+    colour (:func:`colour.relabel_contact_by_colour`: depth cannot tell an object's bottom edge
+    from the floor it stands on)."""
+
+    def frame_labels(item) -> tuple[int, tuple[np.ndarray, np.ndarray]]:
+        v, lab, tree = item
+        own = lab[tree.query(v.points_world, workers=-1)[1]]
+        if seq is not None:
+            own = relabel_contact_by_colour(v.pixels, own, v.stride, seq.read_rgb(v.frame), ENVIRONMENT)
+        return v.frame.index, (v.pixels, own)
+
+    trees = thread_map(lambda c: cKDTree(c.points), per.clouds)
+    items = [(v, lab, tree) for c, lab, tree in zip(per.clouds, labels, trees) for v in c.views]
+    return dict(thread_map(frame_labels, items))
 
 
 @dataclass(frozen=True, eq=False)

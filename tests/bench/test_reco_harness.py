@@ -88,7 +88,7 @@ def test_known_errors_are_measured(tiny_root, tmp_path, monkeypatch):
 
     fake, pixels, counts = _fake_reconstruction(tiny_root, tilt_deg=2.0, offset_m=0.01, drop_share=0.25)
     monkeypatch.setattr(perception, "reconstruct_sequence", lambda *a, **k: fake)
-    monkeypatch.setattr(perception, "pixel_labels", lambda per, labels: pixels)
+    monkeypatch.setattr(perception, "pixel_labels", lambda per, labels, seq=None: pixels)
     rec = R.evaluate_case(TINY, tiny_root, tmp_path / "out", verify=False)
     assert rec["ok"], rec["error"]
     assert rec["axis_error_deg"] == pytest.approx(2.0, abs=1e-9)
