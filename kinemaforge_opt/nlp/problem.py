@@ -28,7 +28,9 @@ class _Variable:
 @dataclass(frozen=True)
 class Result:
     """An IPOPT solve.  values: variable name -> optimal value (reshaped as declared);
-    costs: name -> weighted value at the optimum; violations: constraint name -> max violation."""
+    costs: name -> weighted value at the optimum; violations: constraint name -> max violation.
+    lam_x, lam_g: the bound and constraint multipliers at the last iterate (the warm start of a
+    continuation, :meth:`Problem.solve`)."""
 
     success: bool
     status: str
@@ -39,6 +41,14 @@ class Result:
     violations: dict[str, float]
     solve_time_s: float
     stats: dict = field(repr=False, default_factory=dict)
+    lam_x: np.ndarray | None = field(repr=False, default=None)
+    lam_g: np.ndarray | None = field(repr=False, default=None)
+
+    @property
+    def final_mu(self) -> float:
+        """IPOPT's barrier parameter at the last iterate (NaN when the stats do not hold it)."""
+        mu = self.stats.get("iterations", {}).get("mu", [])
+        return float(mu[-1]) if len(mu) else float("nan")
 
     def violated(self, tol: float = 1e-6) -> list[str]:
         """Names of constraints violated by more than ``tol``."""
@@ -132,8 +142,18 @@ class Problem:
         so one compiled problem serves every subset of free parameters."""
         return CompiledProblem(self, max_iter, tol, print_level, options)
 
-    def solve(self, max_iter: int = 500, tol: float = 1e-8, print_level: int = 0, options: dict | None = None) -> Result:
-        """Solve with IPOPT (MUMPS).  Returns a :class:`Result` whatever IPOPT's outcome."""
+    def solve(self, max_iter: int = 500, tol: float = 1e-8, print_level: int = 0, options: dict | None = None,
+              warm: Result | None = None) -> Result:
+        """Solve with IPOPT (MUMPS).  Returns a :class:`Result` whatever IPOPT's outcome.
+
+        warm: the result of an earlier solve of a problem of the same layout (its last iterate
+        is this problem's initial guess): IPOPT starts from its multipliers and barrier parameter
+        instead of restarting the barrier at ``mu_init`` — a restart pushes every bounded variable
+        back into the interior and can undo hundreds of iterations' progress."""
+        if warm is not None and warm.lam_x is not None and np.isfinite(warm.final_mu):
+            options = {**(options or {}), "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": warm.final_mu,
+                       "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9}
+            return self.compile(max_iter, tol, print_level, options).solve(multipliers=(warm.lam_x, warm.lam_g))
         return self.compile(max_iter, tol, print_level, options).solve()
 
 
@@ -172,8 +192,9 @@ class CompiledProblem:
         return out
 
     def solve(self, init: dict | None = None, lower: dict | None = None, upper: dict | None = None,
-              constraint_bounds: dict | None = None) -> Result:
-        """Solve from the declared guesses and bounds, with the given overrides."""
+              constraint_bounds: dict | None = None, multipliers: tuple[np.ndarray, np.ndarray] | None = None) -> Result:
+        """Solve from the declared guesses and bounds, with the given overrides; ``multipliers``:
+        initial (lam_x, lam_g) (with IPOPT's ``warm_start_init_point``)."""
         problem = self.problem
         cons = problem._constraints
         lbg = np.concatenate([c[1] for c in cons.values()]) if cons else np.zeros(0)
@@ -183,8 +204,9 @@ class CompiledProblem:
                 raise KinemaforgeError(f"problem {problem.name!r}: no constraint {n!r}; constraints: {', '.join(cons)}")
             lbg[self._gslices[n]], ubg[self._gslices[n]] = lo, hi
         start = time.perf_counter()
+        warm = {} if multipliers is None else {"lam_x0": multipliers[0], "lam_g0": multipliers[1]}
         sol = self.solver(x0=self._vector("init", init), lbx=self._vector("lower", lower),
-                          ubx=self._vector("upper", upper), lbg=lbg, ubg=ubg)
+                          ubx=self._vector("upper", upper), lbg=lbg, ubg=ubg, **warm)
         elapsed = time.perf_counter() - start
         stats = self.solver.stats()
         xs = sol["x"].full().ravel()
@@ -212,4 +234,6 @@ class CompiledProblem:
             violations=violations,
             solve_time_s=elapsed,
             stats=dict(stats),
+            lam_x=sol["lam_x"].full().ravel(),
+            lam_g=sol["lam_g"].full().ravel(),
         )

@@ -1002,14 +1002,16 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     opts = dataclasses.replace(options, dyn=want_dense)
 
     def run(name, corr, dense, held=frozenset(), converged_only=False, start=None, aligned=None, accept=None,
-            stage_options=None):
+            stage_options=None, warm=None):
         """Solve a stage from ``start`` (default: the current state) with ``stage_options``
         (default: the current ones); ``accept``: a test of a converged result that must also
-        pass.  Returns (problem, result, the unaccepted last iterate or None)."""
+        pass; ``warm``: the stopped result whose last iterate ``start`` is (IPOPT warm start).
+        Returns (problem, result, the unaccepted last iterate or None)."""
         nonlocal state
         t0 = time.perf_counter()
         sp = build_screw_problem(data, stage_options or opts, start or state, corr, dense, held, aligned)
-        res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn, sp.hess_lag))
+        res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn, sp.hess_lag),
+                               warm=warm)
         accepted, iterate = False, None
         if np.isfinite(res.objective) and _physical(data, candidate := read_solution(sp, res)):
             # an unconverged iterate is kept only if it fits the observed points no worse (VIS_SLACK)
@@ -1030,10 +1032,11 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
 
     def run_dense(name, corr, held=frozenset(), converged_only=False):
         """A dense stage; stopped at max_iter on an iterate that fits the points worse than the
-        state before, it is continued once from that iterate (IPOPT's barrier restarts there)."""
+        state before, it is continued once from that iterate, warm-started with the stopped
+        solve's multipliers and barrier parameter."""
         sp, res, iterate = run(name, corr, True, held, converged_only)
         if iterate is not None and not res.success and not converged_only:
-            sp, res, _ = run(f"{name}_continued", corr, True, held, start=iterate)
+            sp, res, _ = run(f"{name}_continued", corr, True, held, start=iterate, warm=res)
         return sp, res
 
     if options.coarse_to_fine and options.vis:
