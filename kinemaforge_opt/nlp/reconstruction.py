@@ -985,8 +985,9 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     solve with the correspondences of the closed form.  A stage that does not converge is
     recorded (``success`` False, IPOPT's status kept); its last iterate is kept (``accepted``)
     only if its robust visual term is no worse than before the stage (within :data:`VIS_SLACK`),
-    else it is continued once from that iterate (``<stage>_continued``: protocol_drawer_1@s1's
-    full stage stopped at 200 iterations and converged 115 later) and judged the same way, and
+    else it is continued once from that iterate, warm-started with its multipliers and barrier
+    parameter (``<stage>_continued``: protocol_drawer_1@s1's full stage stopped at 200 iterations
+    and converged 46 later; restarted cold, it stopped at 200 again) and judged the same way, and
     if refused again the next stage starts from the previous state.  The re-weighted full solve
     is kept only when it converges."""
     options = options or ScrewOptions()
