@@ -24,31 +24,10 @@ from pathlib import Path
 import numpy as np
 
 from kinemaforge_opt import calibrate, write_urdf
+from kinemaforge_opt.demo import hidden_physics_door
 from kinemaforge_opt.io.atomic import write_text_atomic
-from kinemaforge_opt.io.recording import Recording
 from kinemaforge_opt.nlp.joint_space import build_joint_space_fit
 from kinemaforge_opt.spatial import axis_angle_error
-from kinemaforge_opt.synth.effects import ConcealedEffect, true_model
-from kinemaforge_opt.synth.groundtruth import HandPlan, simulate
-from kinemaforge_opt.synth.objects import make_object
-
-HIDDEN = {"tilt_deg": 3.0, "damping": 0.2, "coulomb": 0.3}
-
-
-def recorded_door(seed: int = 0):
-    """(nominal model, noisy 30-Hz recording, true axis) of a MuJoCo door with HIDDEN's physics."""
-    obj = make_object("cabinet", seed)
-    joint = obj.model.joint_names[0]
-    hidden = (
-        ConcealedEffect("axis_tilt", joint, np.deg2rad(HIDDEN["tilt_deg"]), (("azimuth", 0.6),)),
-        ConcealedEffect("viscous_damping", joint, HIDDEN["damping"]),
-        ConcealedEffect("coulomb_friction", joint, HIDDEN["coulomb"]),
-    )
-    plan = HandPlan(goals=(0.5,), push_s=0.8, free_s=1.7, release_speed=0.15)  # stays off the stops
-    ep = simulate(obj.model, obj.handles, hidden, plan=plan, record_hz=30)
-    q = ep.q + np.random.default_rng(seed).normal(0.0, 2e-3, ep.q.shape)
-    rec = Recording(ep.t, ep.joint_names, q, tau=ep.tau)
-    return obj.model, rec, true_model(obj.model, hidden).joint(joint).axis
 
 
 def main() -> None:
@@ -56,7 +35,7 @@ def main() -> None:
     ap.add_argument("-o", "--out", type=Path, default=Path("out/03_calibrate_door"))
     args = ap.parse_args()
 
-    model, rec, true_axis = recorded_door()
+    model, rec, hidden, true_axis = hidden_physics_door()  # what the fit is not told
     j = model.joint_names[0]
     free = [f"{j}.axis", f"{j}.damping", f"{j}.coulomb"]
     print(f"recording: {rec.t.size} samples over {rec.t[-1] - rec.t[0]:.2f} s of joint {j!r}, hand torque recorded")
@@ -70,7 +49,7 @@ def main() -> None:
 
     args.out.mkdir(parents=True, exist_ok=True)
     # 2.-3. solve with the energy balance soft and hard; estimates with 95 % intervals
-    truth = {f"{j}.damping": HIDDEN["damping"], f"{j}.coulomb": HIDDEN["coulomb"]}
+    truth = {f"{j}.damping": hidden["damping"], f"{j}.coulomb": hidden["coulomb"]}
     for energy in ("soft", "hard"):
         cal = calibrate(model, rec, free=free, energy=energy)
         write_text_atomic(args.out / f"calibration_{energy}.json", json.dumps(cal.to_dict(), indent=2))
@@ -80,7 +59,7 @@ def main() -> None:
         axis = cal.estimates[f"{j}.axis"]
         err = np.rad2deg(axis_angle_error(axis.value, true_axis))
         print(f"   axis   {np.round(axis.value, 4)}: {err:.2f}° from the true hinge "
-              f"(95 % bound {np.rad2deg(axis.ci95_angle_rad):.2f}°; the nominal was {HIDDEN['tilt_deg']:.1f}° off)")
+              f"(95 % bound {np.rad2deg(axis.ci95_angle_rad):.2f}°; the nominal was {np.rad2deg(hidden['tilt_rad']):.1f}° off)")
         for name, true_value in truth.items():
             e = cal.estimates[name]
             print(f"   {name.split('.')[-1]:<7} {e.value[0]:.3f} {e.unit}, 95 % [{e.ci95_low[0]:.3f}, "

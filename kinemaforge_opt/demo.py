@@ -59,16 +59,16 @@ class DemoReport:
         return next(iter(self.calibration.effects))
 
 
-def run_demo(out_dir: str | Path, seed: int = 0, noise_rad: float = 2e-3, rate_hz: int = 30) -> DemoReport:
-    """Simulate, identify, and write ``out_dir/{model.urdf, recording.csv, calibrated.urdf,
-    demo.json}``.  Deterministic for a given ``seed``."""
-    from .calibration import calibrate
-    from .model import write_urdf
-    from .synth.effects import ConcealedEffect
+def hidden_physics_door(seed: int = 0, noise_rad: float = 2e-3, rate_hz: int = 30):
+    """(nominal model, recording, truth, true axis) of the joint-space demo's door: a procedurally
+    generated cabinet door whose hinge is tilted 3° and which has viscous damping 0.2 N·m·s/rad and
+    Coulomb friction 0.3 N·m, none of it in the nominal model; simulated in MuJoCo, one hand stroke
+    recorded at ``rate_hz`` (q with ``noise_rad`` [rad] of noise, and the hand's joint torque).
+    truth: {"tilt_rad", "damping", "coulomb"}; true axis: (3,) the tilted hinge in the parent frame."""
+    from .synth.effects import ConcealedEffect, true_model
     from .synth.groundtruth import HandPlan, simulate
     from .synth.objects import make_object
 
-    out_dir = Path(out_dir)
     obj = make_object("cabinet", seed)
     model = obj.model
     joint = model.movable_joints[0].name
@@ -84,10 +84,18 @@ def run_demo(out_dir: str | Path, seed: int = 0, noise_rad: float = 2e-3, rate_h
     rng = np.random.default_rng(seed)
     q = episode.q + rng.normal(0.0, noise_rad, episode.q.shape)
     rec = Recording(episode.t, episode.joint_names, q, tau=episode.tau)
+    return model, rec, truth, true_model(model, effects).joint(joint).axis
 
-    from .synth.effects import true_model
 
-    true_axis = true_model(model, effects).joint(joint).axis
+def run_demo(out_dir: str | Path, seed: int = 0, noise_rad: float = 2e-3, rate_hz: int = 30) -> DemoReport:
+    """Simulate (:func:`hidden_physics_door`), identify, and write ``out_dir/{model.urdf,
+    recording.csv, calibrated.urdf, demo.json}``.  Deterministic for a given ``seed``."""
+    from .calibration import calibrate
+    from .model import write_urdf
+
+    out_dir = Path(out_dir)
+    model, rec, truth, true_axis = hidden_physics_door(seed, noise_rad, rate_hz)
+    joint = model.movable_joints[0].name
     cal = calibrate(model, rec, free=[f"{joint}.axis", f"{joint}.damping", f"{joint}.coulomb"])
     err = np.rad2deg(axis_angle_error(cal.estimates[f"{joint}.axis"].value, true_axis))
 

@@ -5,6 +5,8 @@ iterations without converging; warm, 46)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -43,7 +45,7 @@ def test_a_warm_continuation_starts_at_the_stopped_iterate_and_reaches_the_optim
 def test_without_multipliers_there_is_no_warm_start():
     p = _chain(np.full(N, 2.0))
     stopped = p.solve(max_iter=3, options=ADAPTIVE)
-    blank = type(stopped)(**{**stopped.__dict__, "lam_x": None, "lam_g": None})
+    blank = dataclasses.replace(stopped, lam_x=None, lam_g=None)
     again = _chain(stopped.values["x"]).solve(options=ADAPTIVE, warm=blank)
     cold = _chain(stopped.values["x"]).solve(options=ADAPTIVE)
     assert again.iterations == cold.iterations and again.objective == cold.objective
