@@ -37,6 +37,7 @@ from .colour import relabel_contact_by_colour
 from .perceive import Perception, perceive
 from .mass import MassProperties, moving_point_masks, part_mass_properties
 from .segment import CLUSTER_VOXELS
+from .solids import fill_part_solids, part_motions
 from .surface import obj_text, part_surface
 
 BASE, ENVIRONMENT = "base", "environment"
@@ -428,20 +429,38 @@ def _line_record(name: str, line: JointLine) -> dict:
             "origin_world": np.asarray(line.origin_world, float).tolist(), "pitch": float(line.pitch)}
 
 
+def _with_part_solids(per: Perception, labels: list[np.ndarray], model: ArticulatedModel,
+                      q: np.ndarray) -> list[np.ndarray]:
+    """``labels`` with each moving part's solid over the motion ``q`` (T, n) filled
+    (:func:`solids.fill_part_solids`, margin one voxel)."""
+    return fill_part_solids([c.points for c in per.clouds], labels, part_motions(model, q), per.voxel, BASE)
+
+
 def refine_model(per: Perception, graph: GraphResult, seq, density: float, options: ScrewOptions | None,
                  name: str = "reconstruction"):
     """Closed-form model, then (unless ``options`` is None) the screw-axis NLP and the model rebuilt
-    on its joints.  Returns build_model's first five, the ``nlp`` document (None without NLP) and
-    build_model's mass report."""
+    on its joints, with each moving part's solid over the final joints' motion filled into the
+    point labels (:mod:`solids`; the NLP sees the perception stage's labels).  Returns
+    build_model's first five, the ``nlp`` document (None without NLP) and build_model's mass
+    report."""
     lines = closed_form_lines(per, graph)
     model, records, clouds_world, meshes, labels, masses, mass_report = build_model(per, graph, density, name, lines)
-    if options is None or not model.movable_joints:
+    if not model.movable_joints:
+        return model, records, clouds_world, meshes, labels, None, mass_report
+    if options is None:
+        q = np.column_stack([lines[j.name].q for j in model.movable_joints])
+        labels = _with_part_solids(per, labels, model, q)
+        model, records, clouds_world, meshes, labels, _, mass_report = build_model(per, graph, density, name, lines,
+                                                                                   labels, masses)
         return model, records, clouds_world, meshes, labels, None, mass_report
     t0 = time.perf_counter()
     data = screw_data(per, seq, model, lines, clouds_world, labels)
     prepare_s = time.perf_counter() - t0
     result = refine_screws(data, options)
     new_lines = refined_lines(result, per, lines)
+    # the NLP fits the labels of the perception stage; the parts' solids over the fitted motion
+    # then claim their insides for the meshes and the reported labels
+    labels = _with_part_solids(per, labels, result.model, result.q)
     model, records, clouds_world, meshes, labels, _, mass_report = build_model(per, graph, density, name, new_lines,
                                                                                labels, masses)
     model = _apply_identified(model, records, result)
