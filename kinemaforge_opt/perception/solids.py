@@ -3,16 +3,16 @@ joints, claim what lies inside them at every step.
 
 A drawer's interior floor is seen only while the drawer is open; where the drawer then rests, the
 floor's readings stop changing, the free-space test calls them static and the labels leave them
-BASE (10–12 % of an open drawer's pixels on the benchmark's drawers).  One step's own part points
-do not enclose it either (only the walls' top edges are labelled toward the back), but the union
-of the part's points over every step does: the front from the closed steps, the walls and floor
-from the open ones.  Moved with the *fitted* joint motion (one rigid motion per part, along a
-straight axis), the union does not smear the way the per-step tracks do (a track that sags 1–3 cm
-swept the chest's hull over the body's rails; see docs/NOTES.md).
+BASE (10–12 % of the open drawer's pixels at each open step of the held-out eval_drawer_0).  One
+step's own part points do not enclose it either (only the walls' top edges are labelled toward
+the back), but the union of the part's points over every step does: the front from the closed
+steps, the walls and floor from the open ones.  Moved with the *fitted* joint motion (one rigid
+motion per part, along a straight axis), the union does not smear the way the per-step tracks do
+(a track that sags 1–3 cm swept the chest's hull over the body's rails; see docs/NOTES.md).
 
 What the hull would take wrongly is the static body next to a part (rails, the carcass's edge):
-such a point stays occupied at steps when the part has moved away from it, so a point that is seen
-at more than half of the steps where it lies clearly outside the moved hull is left as it is.
+such a place stays occupied at steps when the part has moved away from it, so a point whose place
+is seen at half or more of the steps where it lies clearly outside the moved hull is left as it is.
 """
 
 from __future__ import annotations
