@@ -6,7 +6,7 @@
 fusion), ``change`` (free-space tests; per-pixel status for static cameras), ``segment``
 (DBSCAN proposals, environment planes), ``track`` (KD-tree ICP tracking, growth, merging), ``perceive`` (the stages in order),
 ``resegment`` (motion-consistent per-point split of tracked proposals), ``surface`` (meshes, mass),
-``reconstruct`` (the flow).
+``solids`` (each part's solid over its fitted motion claims its inside), ``reconstruct`` (the flow).
 """
 
 from .change import MOVING, STATIC, UNKNOWN, free_space_test, motion_status
