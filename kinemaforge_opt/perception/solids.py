@@ -48,6 +48,12 @@ def fill_part_solids(points: list[np.ndarray], labels: list[np.ndarray], motions
     motion, moved to the zero configuration; a point inside several solids takes the part whose
     hull point is nearest.  A candidate is refused when something is seen at its place (within
     ``margin``) at ≥ :data:`STATIC_SHARE` of the steps where the moved solid is clearly elsewhere."""
+    if len(labels) != len(points):
+        raise ValueError(f"labels has {len(labels)} steps, points {len(points)}")
+    for part, T in motions.items():
+        if np.shape(T) != (len(points), 4, 4):
+            raise ValueError(f"motion of part {part!r} has shape {np.shape(T)}; expected ({len(points)}, 4, 4), "
+                             "one pose per step of points")
     trees = thread_map(cKDTree, points)
     out = [lab.copy() for lab in labels]
     nearest = [np.full(len(lab), np.inf) for lab in labels]

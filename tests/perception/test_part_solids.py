@@ -10,6 +10,7 @@ stands where the shut drawer's inside would be, seen at every step."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from kinemaforge_opt.perception.solids import fill_part_solids, part_motions
 
@@ -62,6 +63,14 @@ def test_a_step_without_a_motion_is_left_as_labelled():
     out = fill_part_solids(points, labels, {"p0": T}, VOXEL, "base")
     assert (out[15] == labels[15]).all()
     assert (out[14][floor[14]] == "p0").all()
+
+
+def test_a_motion_of_the_wrong_length_is_refused_by_name():
+    points, labels, motions, _, _ = _scene()
+    with pytest.raises(ValueError, match=r"motion of part 'p0' has shape \(19, 4, 4\); expected \(20, 4, 4\)"):
+        fill_part_solids(points, labels, {"p0": motions["p0"][:-1]}, VOXEL, "base")
+    with pytest.raises(ValueError, match="labels has 19 steps, points 20"):
+        fill_part_solids(points, labels[:-1], motions, VOXEL, "base")
 
 
 def test_part_motions_move_a_prismatic_child_along_its_axis():
