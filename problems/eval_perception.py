@@ -33,7 +33,7 @@ from kinemaforge_opt.graph.tree import GraphResult
 from kinemaforge_opt.io.sequence import load_sequence
 from kinemaforge_opt.perception import perceive
 from kinemaforge_opt.perception.perceive import Perception
-from kinemaforge_opt.perception.reconstruct import BASE, ENVIRONMENT, pixel_labels, point_labels
+from kinemaforge_opt.perception.reconstruct import BASE, ENVIRONMENT, pixel_labels, point_labels, track_parts
 from kinemaforge_opt.spatial import axis_angle_error, line_distance
 from kinemaforge_opt.synth import generate_case
 from kinemaforge_opt.synth.case import Case
@@ -70,8 +70,7 @@ def ground_truth(case_root: str | Path) -> Truth:
 def _confusion(per: Perception, graph: GraphResult, truth: Truth) -> tuple[dict, list[str], list[str]]:
     """Pixel counts {(predicted part, true label name): n} over every kept pixel of every frame
     (:func:`pixel_labels` with the sequence's RGB images)."""
-    tree = graph.best
-    part_of = {m: p for p, members in tree.parts.items() for m in members if m in per.tracks.names}
+    part_of = track_parts(graph, per.tracks)
     frames = [v.frame for c in per.clouds for v in c.views]
     seq = load_sequence(truth.root / "sequence")
     C, preds, trues = label_confusion(truth.root, frames, pixel_labels(per, point_labels(per, part_of), seq))

@@ -7,7 +7,7 @@ A CASE_ROOT is a generated case folder (``sequence/`` and ``ground_truth/``), e.
 instances that ``problems.eval_perception --keep -o DIR`` leaves in DIR.  Each case runs
 perception, the graph and the screw NLP (``refine_model``, as ``kinemaforge reconstruct`` does);
 "without" is the perception stage's point labels, "with" the labels the reconstruction reports.
-Both are scored like the benchmark (``bench.reconstruction.label_confusion``).  Prints a line per
+Both are scored like the benchmark (``bench.reconstruction.label_metrics``).  Prints a line per
 case and the means.
 """
 
@@ -16,19 +16,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinemaforge_opt.bench.metrics import part_iou_from_counts
-from kinemaforge_opt.bench.reconstruction import label_confusion
+from kinemaforge_opt.bench.reconstruction import label_metrics
 from kinemaforge_opt.graph import infer_tree
 from kinemaforge_opt.io.sequence import load_sequence
 from kinemaforge_opt.nlp.reconstruction import ScrewOptions
-from kinemaforge_opt.perception import ENVIRONMENT, perceive, pixel_labels
-from kinemaforge_opt.perception.reconstruct import DEFAULT_DENSITY, point_labels, refine_model
-
-
-def part_iou(root: Path, seq, per, labels) -> float:
-    counts, pred, true = label_confusion(root, seq.frames, pixel_labels(per, labels, seq))
-    return part_iou_from_counts(counts, pred, true, pred_ignore=(ENVIRONMENT,),
-                                true_ignore=("nothing", "environment")).mean_iou
+from kinemaforge_opt.perception import perceive
+from kinemaforge_opt.perception.reconstruct import DEFAULT_DENSITY, point_labels, refine_model, track_parts
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -40,9 +33,9 @@ def main(argv: list[str] | None = None) -> int:
         seq = load_sequence(root / "sequence")
         per = perceive(seq)
         graph = infer_tree(per.tracks)
-        part_of = {m: p for p, members in graph.best.parts.items() for m in members if m in per.tracks.names}
         labels = refine_model(per, graph, seq, DEFAULT_DENSITY, ScrewOptions())[4]
-        rows.append((part_iou(root, seq, per, point_labels(per, part_of)), part_iou(root, seq, per, labels)))
+        rows.append((label_metrics(root, seq, per, point_labels(per, track_parts(graph, per.tracks))).mean_iou,
+                     label_metrics(root, seq, per, labels).mean_iou))
         print(f"{root.name}: part IoU without solids {rows[-1][0]:.4f}, with {rows[-1][1]:.4f}", flush=True)
     print(f"mean over {len(rows)}: without {sum(r[0] for r in rows) / len(rows):.4f}, "
           f"with {sum(r[1] for r in rows) / len(rows):.4f}")

@@ -313,6 +313,17 @@ def option_support(options: dict) -> str | None:
     return resolve_options(options)[1]
 
 
+def label_metrics(case_root: Path, seq, per, labels: list[np.ndarray]):
+    """Part-IoU metrics (:func:`metrics.part_iou_from_counts`) of the pixel labels that the fused
+    points' ``labels`` give the sequence ``seq`` (:func:`perception.pixel_labels`) against the
+    case's rendered label images; environment pixels, true and predicted, are left out."""
+    from ..perception import ENVIRONMENT, pixel_labels
+
+    counts, pred_names, true_names = label_confusion(case_root, seq.frames, pixel_labels(per, labels, seq))
+    return part_iou_from_counts(counts, pred_names, true_names, pred_ignore=(ENVIRONMENT,),
+                                true_ignore=("nothing", "environment"))
+
+
 def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = None, verify: bool = True) -> dict:
     """Reconstruct ``case`` (generated at ``case_root``) into ``out_dir`` with the keyword
     ``options`` and score it.  With ``verify``, a reconstruction.json without "verification" is
@@ -320,7 +331,7 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
     failing reconstruction is a record with ``ok`` False and its error, never an exception.
     Errors in degrees and metres; times in seconds."""
     from ..io.sequence import load_sequence
-    from ..perception import ENVIRONMENT, pixel_labels, reconstruct_sequence
+    from ..perception import reconstruct_sequence
 
     options = dict(options or {})
     obj_joints = true_joints(case_root)
@@ -358,10 +369,7 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
         except Exception as e:  # noqa: BLE001
             rec["truth_verification_error"] = f"{type(e).__name__}: {e}"
 
-    seq = load_sequence(case_root / "sequence")
-    counts, pred_names, true_names = label_confusion(case_root, seq.frames, pixel_labels(r.perception, r.labels, seq))
-    m = part_iou_from_counts(counts, pred_names, true_names, pred_ignore=(ENVIRONMENT,),
-                             true_ignore=("nothing", "environment"))
+    m = label_metrics(case_root, load_sequence(case_root / "sequence"), r.perception, r.labels)
     est = [JointRecord(j["name"], j["type"], j["parent"], j["child"], np.asarray(j["axis_world"], float),
                        np.asarray(j["origin_world"], float)) for j in doc["joints"]]
     scores = match_joints(est, obj_joints, m.pred_to_true)

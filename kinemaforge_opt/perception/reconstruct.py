@@ -50,6 +50,11 @@ MAJORITY_SHARE = 0.75
 DEFAULT_DENSITY = 300.0
 
 
+def track_parts(graph: GraphResult, tracks: PoseTracks) -> dict[str, str]:
+    """Track name -> part name of the graph's best tree (the tracks ``tracks`` holds)."""
+    return {m: p for p, members in graph.best.parts.items() for m in members if m in tracks.names}
+
+
 def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
     """Per time step, (M_t,) part names of its fused points: a non-static point within the
     inlier distance of a tracked proposal takes the proposal's part (``part_of``: track name ->
@@ -284,7 +289,7 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
     neither depends on ``lines``."""
     tracks, tree = per.tracks, graph.best
     lines = closed_form_lines(per, graph) if lines is None else lines
-    part_of = {m: p for p, members in tree.parts.items() for m in members if m in tracks.names}
+    part_of = track_parts(graph, tracks)
     reps = {p: _representative(m, tracks) for p, m in tree.parts.items() if p != tree.root}
     s0 = _zero_step(tracks, list(reps.values()))
     T_world_link0 = {tree.root: np.eye(4)}  # link frames at the zero configuration
@@ -448,21 +453,20 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
     if not model.movable_joints:
         return model, records, clouds_world, meshes, labels, None, mass_report
     if options is None:
-        q = np.column_stack([lines[j.name].q for j in model.movable_joints])
-        labels = _with_part_solids(per, labels, model, q)
-        model, records, clouds_world, meshes, labels, _, mass_report = build_model(per, graph, density, name, lines,
-                                                                                   labels, masses)
-        return model, records, clouds_world, meshes, labels, None, mass_report
-    t0 = time.perf_counter()
-    data = screw_data(per, seq, model, lines, clouds_world, labels)
-    prepare_s = time.perf_counter() - t0
-    result = refine_screws(data, options)
-    new_lines = refined_lines(result, per, lines)
-    # the NLP fits the labels of the perception stage; the parts' solids over the fitted motion
-    # then claim their insides for the meshes and the reported labels
-    labels = _with_part_solids(per, labels, result.model, result.q)
-    model, records, clouds_world, meshes, labels, _, mass_report = build_model(per, graph, density, name, new_lines,
+        final_lines, moved, q = lines, model, np.column_stack([lines[j.name].q for j in model.movable_joints])
+    else:
+        t0 = time.perf_counter()
+        data = screw_data(per, seq, model, lines, clouds_world, labels)
+        prepare_s = time.perf_counter() - t0
+        result = refine_screws(data, options)
+        final_lines, moved, q = refined_lines(result, per, lines), result.model, result.q
+    # the NLP fits the labels of the perception stage; the parts' solids over the final joints'
+    # motion then claim their insides for the meshes and the reported labels
+    labels = _with_part_solids(per, labels, moved, q)
+    model, records, clouds_world, meshes, labels, _, mass_report = build_model(per, graph, density, name, final_lines,
                                                                                labels, masses)
+    if options is None:
+        return model, records, clouds_world, meshes, labels, None, mass_report
     model = _apply_identified(model, records, result)
     doc = {
         "enabled": True, "terms": result.terms, "iterations": result.iterations, "success": result.success,

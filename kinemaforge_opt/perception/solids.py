@@ -23,6 +23,7 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 from ..model import ArticulatedModel
 from ..nlp.reconstruction import transforms_world0_t
 from ..parallel import thread_map
+from ..spatial import transform_points
 
 # A candidate seen at this share (or more) of the steps where it lies clearly outside the moved
 # hull is static body, not the part's inside.
@@ -60,7 +61,7 @@ def fill_part_solids(points: list[np.ndarray], labels: list[np.ndarray], motions
     for part, T in sorted(motions.items()):
         valid = np.flatnonzero(np.isfinite(T).all(axis=(1, 2)))
         T_inv = {s: np.linalg.inv(T[s]) for s in valid}
-        union = np.concatenate([_moved(points[s][labels[s] == part], T_inv[s]) for s in valid] or [np.empty((0, 3))])
+        union = np.concatenate([transform_points(T_inv[s], points[s][labels[s] == part]) for s in valid] or [np.empty((0, 3))])
         try:
             faces = ConvexHull(union).equations  # (F, 4): outward unit normal, offset
         except (QhullError, ValueError):  # too few or coplanar points: no volume to fill
@@ -69,7 +70,7 @@ def fill_part_solids(points: list[np.ndarray], labels: list[np.ndarray], motions
 
         def depth_outside(x: np.ndarray, s: int) -> np.ndarray:
             """(N,) largest face distance of world points x at step s (< 0 inside the solid)."""
-            return (_moved(x, T_inv[s]) @ faces[:, :3].T + faces[:, 3]).max(axis=1)
+            return (transform_points(T_inv[s], x) @ faces[:, :3].T + faces[:, 3]).max(axis=1)
 
         for s in valid:
             cand = np.flatnonzero(labels[s] == base)
@@ -85,12 +86,8 @@ def fill_part_solids(points: list[np.ndarray], labels: list[np.ndarray], motions
                 outside_steps += away
                 seen_steps += away & np.isfinite(trees[k].query(x, distance_upper_bound=margin)[0])
             cand = cand[(outside_steps == 0) | (seen_steps < STATIC_SHARE * outside_steps)]
-            d = union_tree.query(_moved(points[s][cand], T_inv[s]), workers=-1)[0]
+            d = union_tree.query(transform_points(T_inv[s], points[s][cand]), workers=-1)[0]
             take = d < nearest[s][cand]
             out[s][cand[take]] = part
             nearest[s][cand[take]] = d[take]
     return out
-
-
-def _moved(x: np.ndarray, T: np.ndarray) -> np.ndarray:
-    return x @ T[:3, :3].T + T[:3, 3]
