@@ -11,10 +11,12 @@ For every joint whose fitted axis lies within :data:`NEAR_DEG` of parallel or pe
 gravity, the constrained fit (``aligned:<joint>`` linear constraints on its axis variable) is a
 nested model with fewer parameters: two for a plumb axis (its direction is fixed), one for a
 level one (its rise is fixed).  It is chosen by the Bayesian information criterion on the
-screw NLP's own objective (each term ≈ ½ χ²): kept when Δχ² = 2 n (J_aligned − J_free) is at
-most k ln n, n the number of visual residuals and k the parameters it saves.  A tilt the data
-support (a concealed axis tilt of a degree, a hinge mounted askew) costs far more than that and
-stays.
+screw NLP's terms (each ≈ ½ χ²): kept when Δχ² = 2 n (J_aligned − J_free) is at most k ln n, n
+the number of visual residuals and k the parameters it saves.  The visual part of each J is
+scored on the fit's own correspondences (refreshed under its motion until they settle, points
+left out of the gates charged the loss at the gate; :func:`~.reconstruction.refine_screws`), so
+that neither hypothesis is judged on pairs made under the other.  A tilt the data support (a
+concealed axis tilt of a degree, a hinge mounted askew) costs far more than that and stays.
 """
 
 from __future__ import annotations
