@@ -1161,11 +1161,13 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                 return (vis_al + non_visual(r, n_al)) / n_res
 
             j_free = score_free / n_res
-            if sp.use_dyn:  # the dense states of the free fit, shifted by what settling moved at the frames
+            if sp.use_dyn:
+                # the free fit's dense states, q shifted by what settling moved at the frames and v
+                # kept (the shift's derivative added the per-frame jitter to v: refrigerator_1's
+                # aligned fit then ran into max_iter, where from these it converges in 11)
                 cols = np.searchsorted(state.t, data.times)
                 shift = CubicSpline(data.times, start.q - state.q[cols], axis=0)
-                start = dataclasses.replace(start, t=state.t, q=state.q + shift(state.t),
-                                            v=None if state.v is None else state.v + shift(state.t, 1))
+                start = dataclasses.replace(start, t=state.t, q=state.q + shift(state.t), v=state.v)
             sp_al, res_al, _ = run("gravity_aligned", corr_al, sp.use_dyn, held, converged_only=True, start=start,
                                    aligned=rows, accept=lambda r: prefer_aligned(j_free, j_aligned(r), n_res, saved),
                                    stage_options=sp.options)
