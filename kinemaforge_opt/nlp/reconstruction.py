@@ -1090,13 +1090,16 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         notes.append("dyn: not identified, kept at the nominal value: " + ", ".join(sorted(unsupported)))
         sp_refit, res_refit = run_dense("full_refit", corr, held=frozenset(unsupported))
         if stages[-1]["accepted"]:  # else the full stage's fit stands, its unsupported friction nominal
-            sp, res, held = sp_refit, res_refit, frozenset(unsupported)
+            sp, res = sp_refit, res_refit
             refit = _identifiability(sp, res)
             # a parameter that the refit no longer determines is held too, without another solve
             later = _unsupported(refit)
             state = _nominal_friction(state, data.model, later)
             identifiability = {**identifiability, **_conditional(refit, identifiability)}
             unsupported |= later
+        # what the note says is kept at its nominal value stays there in the stages after (the
+        # gravity-aligned refit fitted it again when the refit above was refused)
+        held = frozenset(unsupported)
     if options.gravity_aligned and res.success and fitted_state:
         aligned = {j.name: (kind, constraint_rows(data.model, j.name, kind)) for k, j in enumerate(data.model.movable_joints)
                    if (kind := alignment(data.model, j.name, state.axes[k]))}
