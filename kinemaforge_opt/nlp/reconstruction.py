@@ -1116,11 +1116,12 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         n_points = sum(min(0 if pts is None else len(pts), size) for obs in data.observed.values() for pts in obs)
         settled_cache: dict = {}
 
-        def settled(rows: dict[str, np.ndarray], name: str) -> tuple[ScrewState, dict | None, float]:
+        def settled(rows: dict[str, np.ndarray], name: str) -> tuple[ScrewState, dict | None, float, int]:
             """From the current fit with the axes of ``rows`` projected, rounds of the visual term
             with those axes held aligned (pairs refreshed before each, as in the gated warm-up)
             until nothing moves.  Returns (state on the frame grid, its pairs, its truncated
-            visual score Σ ρ_δ(r)/δ² + points left out × ``charge``)."""
+            visual score Σ ρ_δ(r)/δ² + points left out × ``charge``, the number of pairs within
+            the gates)."""
             key = tuple(sorted(rows))
             if key in settled_cache:
                 return settled_cache[key]
@@ -1128,7 +1129,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             start = dataclasses.replace(state, t=data.times.copy(), q=state.q[cols], v=None, axes=np.array(
                 [project(a, rows[j.name]) if j.name in rows else a for a, j in zip(state.axes, data.model.movable_joints)]))
             if corr is None:
-                return start, None, 0.0
+                return start, None, 0.0, 0
             for r in range(options.rounds):
                 pairs = correspondences(data, start, size, plane_gate=plane_gate)
                 _, _, solved = run(f"{name}_vis_{r + 1}", pairs, False, held, converged_only=True, start=start,
@@ -1140,8 +1141,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                 if not moved:
                     break
             pairs = correspondences(data, start, size, plane_gate=plane_gate)
-            n_in = sum(c.weights.sum() for items in pairs.values() for c in items)
-            settled_cache[key] = start, pairs, vis_value(data, start, pairs) + (n_points - n_in) * charge
+            n_in = int(sum(c.weights.sum() for items in pairs.values() for c in items))
+            settled_cache[key] = start, pairs, vis_value(data, start, pairs) + (n_points - n_in) * charge, n_in
             return settled_cache[key]
 
         def non_visual(r: Result, n: int) -> float:
@@ -1157,8 +1158,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             saved = sum(aligned[name][1].shape[0] for name in names)
             n_res = max(sp.n_vis, 1)
             score_free = settled(kept, "gravity_free")[2] + non_visual(res, n_res)
-            start, corr_al, vis_al = settled(rows, "gravity_aligned")
-            n_al = max(sp.n_vis if corr_al is None else int(sum(c.weights.sum() for items in corr_al.values() for c in items)), 1)
+            start, corr_al, vis_al, n_in_al = settled(rows, "gravity_aligned")
+            n_al = n_res if corr_al is None else max(n_in_al, 1)
 
             def j_aligned(r) -> float:  # both scores in the free fit's normalisation
                 return (vis_al + non_visual(r, n_al)) / n_res
