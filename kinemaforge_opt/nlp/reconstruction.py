@@ -181,6 +181,8 @@ class ScrewData:
     :class:`SurfaceModel` at q = 0.  delta: pseudo-Huber width [m] (point noise level).
     gate: correspondence rejection distance [m].  wrenches: recorded forces or None.
     pushed_link: (len(wrenches.t),) name of the link the force acts on per sample ("" = none).
+    sightlines: like ``observed``, per point the unit vector towards the cameras that saw it, or
+    None (no back-face test, :func:`~.visual.correspond`).
     """
 
     model: ArticulatedModel
@@ -192,6 +194,7 @@ class ScrewData:
     gate: float
     wrenches: Wrenches | None = None
     pushed_link: np.ndarray | None = None
+    sightlines: dict[str, list[np.ndarray | None]] | None = None
 
     def __post_init__(self):
         n, T = self.model.nq, self.times.size
@@ -202,6 +205,11 @@ class ScrewData:
                 raise DataError(f"part {link!r} has observed points but no surface model")
             if len(obs) != T:
                 raise DataError(f"part {link!r}: {len(obs)} observation steps, expected {T}")
+            if self.sightlines is not None:
+                seen = self.sightlines.get(link, [])
+                rows = lambda a: 0 if a is None else len(a)  # noqa: E731
+                if len(seen) != T or any(rows(o) != rows(v) for o, v in zip(obs, seen)):
+                    raise DataError(f"part {link!r}: its sightlines do not match its observed points step by step")
         if self.wrenches is not None and (self.pushed_link is None or len(self.pushed_link) != self.wrenches.t.size):
             raise DataError("wrenches need pushed_link: one link name per wrench sample")
 
@@ -372,10 +380,12 @@ def correspondences(data: ScrewData, state: ScrewState, size: int, seed: int = 0
     for p, (link, obs) in enumerate(data.observed.items()):
         Ts = transforms_world0_t(model, link, state.q[cols])
         items = []
-        for s, pts in enumerate(obs):
+        seen = data.sightlines[link] if data.sightlines is not None else [None] * len(obs)
+        for s, (pts, sight) in enumerate(zip(obs, seen)):
             pts = np.zeros((0, 3)) if pts is None else pts
-            pts = pts[fixed_subsample(pts, size, seed + 1000 * p + s)]
-            items.append(correspond(pts, Ts[s], data.surfaces[link], data.gate, size, delta, plane_gate))
+            pick = fixed_subsample(pts, size, seed + 1000 * p + s)
+            items.append(correspond(pts[pick], Ts[s], data.surfaces[link], data.gate, size, delta, plane_gate,
+                                    None if sight is None else sight[pick]))
         out[link] = items
     return out
 
@@ -1296,8 +1306,14 @@ def refused_surfaces(data: ScrewData, state: ScrewState) -> ScrewData:
     surfaces = {}
     for link, obs in data.observed.items():
         Ts = transforms_world0_t(model, link, state.q[cols])
-        back = [(pts - T[:3, 3]) @ T[:3, :3] for pts, T in zip(obs, Ts) if pts is not None and len(pts)]
-        surfaces[link] = surface_model(np.concatenate(back), data.delta, link) if back else data.surfaces[link]
+        seen = data.sightlines[link] if data.sightlines is not None else [None] * len(obs)
+        steps = [(pts, sight, T) for pts, sight, T in zip(obs, seen, Ts) if pts is not None and len(pts)]
+        if not steps:
+            surfaces[link] = data.surfaces[link]
+            continue
+        back = np.concatenate([(pts - T[:3, 3]) @ T[:3, :3] for pts, _, T in steps])
+        sight = None if data.sightlines is None else np.concatenate([sight @ T[:3, :3] for _, sight, T in steps])
+        surfaces[link] = surface_model(back, data.delta, link, sightlines=sight)
     return dataclasses.replace(data, surfaces=surfaces)
 
 

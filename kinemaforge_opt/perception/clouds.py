@@ -79,11 +79,14 @@ class FrameCloud:
 @dataclass(frozen=True, eq=False)
 class TimeCloud:
     """All views at one time, fused.  t: time [s].  views: the per-image clouds.
-    points: (M, 3) voxel-downsampled, outlier-filtered world points [m]."""
+    points: (M, 3) voxel-downsampled, outlier-filtered world points [m].  sightlines: (M, 3) unit
+    vectors from each point towards the cameras that saw it (the mean over the readings fused
+    into it); a seen surface faces them (:func:`~kinemaforge_opt.nlp.visual.correspond`)."""
 
     t: float
     views: tuple[FrameCloud, ...]
     points: np.ndarray
+    sightlines: np.ndarray
 
 
 def decimated_camera(camera: CameraInfo, stride: int) -> CameraInfo:
@@ -177,25 +180,26 @@ def pixel_stride(voxel: float, foot: float) -> int:
 
 
 def downsample(points: np.ndarray, voxel: float, outliers: bool = False) -> np.ndarray:
-    """(N, 3) points [m] -> (M, 3) centroids of the points in each occupied voxel of edge
+    """(N, 3 + k) points [m] -> (M, 3 + k) centroids of the points in each occupied voxel of edge
     ``voxel`` [m], cells at integer multiples of the edge (what open3d's ``voxel_down_sample``
-    does up to its grid offset; in numpy, several times faster on a busy host);
+    does up to its grid offset; in numpy, several times faster on a busy host); columns past the
+    third are per-point attributes, averaged over each voxel like the positions;
     with ``outliers``, centroids with fewer than OUTLIER_MIN_NEIGHBOURS others within
     OUTLIER_RADIUS_VOXELS voxels are dropped (isolated speckle)."""
     if len(points) == 0:
-        return np.zeros((0, 3))
-    k = np.floor(points / voxel).astype(np.int64)
+        return np.zeros((0, points.shape[1]))
+    k = np.floor(points[:, :3] / voxel).astype(np.int64)
     k -= k.min(axis=0)
     span = k.max(axis=0) + 1
     key = (k[:, 0] * span[1] + k[:, 1]) * span[2] + k[:, 2]
     _, inv, count = np.unique(key, return_inverse=True, return_counts=True)
-    out = np.stack([np.bincount(inv, points[:, j], minlength=count.size) for j in range(3)], axis=1) / count[:, None]
+    out = np.stack([np.bincount(inv, points[:, j], minlength=count.size) for j in range(points.shape[1])], axis=1) / count[:, None]
     if outliers and len(out) > OUTLIER_MIN_NEIGHBOURS:
         # a centroid is kept when its OUTLIER_MIN_NEIGHBOURS nearest others are all within the
         # radius (a k-nearest query with a distance bound: 3x cheaper than counting every
         # neighbour with query_ball_point, the same decision)
-        d = cKDTree(out).query(out, k=[OUTLIER_MIN_NEIGHBOURS + 1],
-                               distance_upper_bound=OUTLIER_RADIUS_VOXELS * voxel, workers=-1)[0]
+        d = cKDTree(out[:, :3]).query(out[:, :3], k=[OUTLIER_MIN_NEIGHBOURS + 1],
+                                      distance_upper_bound=OUTLIER_RADIUS_VOXELS * voxel, workers=-1)[0]
         out = out[np.isfinite(d[:, 0])]  # the nearest "neighbour" is the point itself
     return out
 
@@ -214,10 +218,12 @@ def fuse(t: float, views: list[FrameCloud], voxel: float, coarse: float | None =
     without it, everything is fused at ``voxel`` and the status is UNKNOWN."""
     from .change import MOVING, STATIC, UNKNOWN
 
-    pts = np.concatenate([v.points_world for v in views]) if views else np.zeros((0, 3))
+    # positions and unit sightlines side by side, so that fusion averages both over each voxel
+    pts = np.concatenate([np.hstack([v.points_world, _unit_rows(v.frame.T_world_camera[:3, 3] - v.points_world)])
+                          for v in views]) if views else np.zeros((0, 6))
     if any(v.status is None for v in views):
         fused = downsample(pts, voxel, outliers=True)
-        return TimeCloud(t, tuple(views), fused), np.full(len(fused), UNKNOWN, dtype=np.int8)
+        return _time_cloud(t, views, fused), np.full(len(fused), UNKNOWN, dtype=np.int8)
     st = np.concatenate([v.status for v in views])
     if coarse is not None and coarse >= 2 * voxel:
         # static pixels are sampled on the coarse grid first (each view then gives about one
@@ -232,4 +238,15 @@ def fuse(t: float, views: list[FrameCloud], voxel: float, coarse: float | None =
         p = downsample(pts[st == code], size, outliers=outl)
         parts.append(p)
         status.append(np.full(len(p), code, dtype=np.int8))
-    return TimeCloud(t, tuple(views), np.concatenate(parts)), np.concatenate(status)
+    return _time_cloud(t, views, np.concatenate(parts)), np.concatenate(status)
+
+
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    """Rows of ``v`` (N, 3) scaled to unit length (zero rows stay zero)."""
+    n = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
+
+
+def _time_cloud(t: float, views, fused: np.ndarray) -> TimeCloud:
+    """The TimeCloud of fused (M, 6) positions and mean sightlines."""
+    return TimeCloud(t, tuple(views), fused[:, :3], _unit_rows(fused[:, 3:]))

@@ -379,26 +379,27 @@ def pushed_links(model: ArticulatedModel, times: np.ndarray, q: np.ndarray, wren
 def screw_data(per: Perception, seq, model: ArticulatedModel, lines: dict[str, JointLine],
                clouds_world: dict[str, np.ndarray], labels: list[np.ndarray]) -> ScrewData:
     """The NLP's inputs from the perception and the closed-form model (see :class:`ScrewData`):
-    observed points per moving part and step, surface models at the zero configuration (the zero
-    step's points, normals from local planes), the Huber width = the voxel edge (the spacing of the
+    observed points per moving part and step with their sightlines, surface models at the zero
+    configuration (the zero step's points, normals from local planes facing the cameras), the Huber width = the voxel edge (the spacing of the
     fused points, which bounds the point-to-plane misfit of a sampled surface) and the gate = two
     ICP inlier distances."""
     moving = [j.child for j in model.movable_joints]
     observed = {p: [c.points[lab == p] for c, lab in zip(per.clouds, labels)] for p in moving}
+    sightlines = {p: [c.sightlines[lab == p] for c, lab in zip(per.clouds, labels)] for p in moving}
     q0 = np.column_stack([_filled(lines[j.name].q, per.times) for j in model.movable_joints]) if moving else np.zeros((per.times.size, 0))
     # Surface models from the zero step's own points (at q = 0 by definition): the fused cloud was
     # moved by the per-step tracks, whose errors blur it (on protocol_cabinet_0 the NLP on the
     # fused surface stopped at 1.4° axis error, on the zero-step surface at 0.14°).  The NLP
     # re-fuses every step with its own motion later (ScrewOptions.refuse).
     s0 = int(np.argmin(np.abs(q0).sum(axis=1)))
-    surfaces = {p: surface_model(observed[p][s0] if len(observed[p][s0]) >= 50 else clouds_world[p], per.voxel, p)
-                for p in moving}
+    surfaces = {p: surface_model(observed[p][s0], per.voxel, p, sightlines=sightlines[p][s0]) if len(observed[p][s0]) >= 50
+                else surface_model(clouds_world[p], per.voxel, p) for p in moving}
     w = seq.wrenches
     pushed = pushed_links(model, per.times, q0, w, clouds_world) if w is not None else None
     if w is not None and not any(pushed):
         w, pushed = None, None
     return ScrewData(model, per.times, q0, observed, surfaces, delta=per.voxel, gate=2 * per.inlier_distance,
-                     wrenches=w, pushed_link=pushed)
+                     wrenches=w, pushed_link=pushed, sightlines=sightlines)
 
 
 def refined_lines(result: ScrewResult, per: Perception, lines: dict[str, JointLine]) -> dict[str, JointLine]:
