@@ -170,3 +170,39 @@ def two_door_data(true: ArticulatedModel, init: ArticulatedModel, times: np.ndar
         observed[j.child], surfaces[j.child] = obs, SurfaceModel(j.child, S, Nrm)
     pushed = np.array(["door_a"] * wrenches.t.size, dtype=object)
     return ScrewData(init, times, q_init, observed, surfaces, delta=0.002, gate=0.05, wrenches=wrenches, pushed_link=pushed)
+
+
+def seen_door_data(true: ArticulatedModel, init: ArticulatedModel, cameras: np.ndarray, sigma: float,
+                   seed: int = 0, sightlines: bool = True) -> tuple[ScrewData, np.ndarray]:
+    """The door ``true`` opening to 1.4 rad over 8 frames as the ``cameras`` (C, 3) [m] see it: of
+    each face only the steps it faces a camera (a convex slab hides nothing else), 400 points per
+    step with Gaussian noise ``sigma`` [m], each with its sightline (the mean unit vector towards
+    the cameras it faces).  The surface model is what the zero step shows, its normals facing the
+    cameras, as perception builds it.  With ``sightlines`` False the data carry none (no back-face
+    test).  Returns (ScrewData, true q (8,))."""
+    times = np.linspace(0.0, 2.0, 8)
+    q = 1.4 * np.sin(0.7 * times)
+    rng = np.random.default_rng(seed)
+    fine, fine_n = door_surface_world(true, 0.01 / 2.3)
+
+    def seen(qk):
+        pts, nrm = moved(true, qk, fine, fine_n)
+        to_cam = cameras[None] - pts[:, None]  # (N, C, 3)
+        faces = np.einsum("nk,nck->nc", nrm, to_cam) > 0
+        unit = to_cam / np.linalg.norm(to_cam, axis=2, keepdims=True)
+        sight = (unit * faces[..., None]).sum(axis=1)
+        keep = faces.any(axis=1)
+        return pts[keep], sight[keep] / np.linalg.norm(sight[keep], axis=1, keepdims=True), nrm[keep]
+
+    obs, sights = [], []
+    for qk in q:
+        pts, sight, _ = seen(qk)
+        pick = rng.choice(len(pts), 400, replace=False)
+        obs.append(pts[pick] + rng.normal(0, sigma, (400, 3)))
+        sights.append(sight[pick])
+    S, _, N = seen(0.0)
+    S, N = S[::5], N[::5]
+    data = ScrewData(init, times, (q + rng.normal(0, 0.03, q.size))[:, None], {"door": obs},
+                     {"door": SurfaceModel("door", S, N, oriented=sightlines)}, delta=max(sigma, 0.002), gate=0.05,
+                     sightlines={"door": sights} if sightlines else None)
+    return data, q

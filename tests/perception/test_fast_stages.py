@@ -9,7 +9,8 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from kinemaforge_opt.perception.change import MOVING, STATIC, UNKNOWN, pixel_status
-from kinemaforge_opt.perception.clouds import DepthNoise, downsample
+from kinemaforge_opt.io.sequence import Frame
+from kinemaforge_opt.perception.clouds import DepthNoise, FrameCloud, downsample, fuse
 from kinemaforge_opt.perception.track import icp, kabsch
 
 
@@ -52,6 +53,30 @@ def test_voxel_grid_gives_the_centroid_of_each_occupied_cell():
     strays = np.array([[5.0, 5, 5], [-5.0, 5, 5], [5.0, -5, 5]])
     kept = downsample(np.concatenate([patch, strays]), 0.01, outliers=True)
     assert kept.max() < 0.2 and len(kept) > 50
+
+
+def test_fused_points_carry_their_sightlines():
+    """Two cameras 2 m above a floor, 2 m apart; each sees its own half and both see a strip in
+    the middle.  A fused point's sightline is the unit vector towards its camera, or the mean of
+    both where both saw it (voxel centroids sit within a voxel of the readings: < 0.5°)."""
+    cams = np.array([[-1.0, 0.0, 2.0], [1.0, 0.0, 2.0]])
+    g = np.arange(-0.5, 0.5, 0.01)
+    floor = np.column_stack([np.repeat(g, g.size), np.tile(g, g.size), np.zeros(g.size**2)])
+    views = []
+    for i, (c, half) in enumerate(zip(cams, (floor[:, 0] < 0.1, floor[:, 0] > -0.1))):
+        T = np.eye(4)
+        T[:3, 3] = c
+        views.append(FrameCloud(Frame(i, 0.0, f"cam{i}", T, "", ""), np.zeros((half.sum(), 2), int), floor[half], np.zeros((1, 1))))
+    cloud, _ = fuse(0.0, views, 0.02)
+    assert cloud.sightlines.shape == cloud.points.shape
+    to = [(c - cloud.points) / np.linalg.norm(c - cloud.points, axis=1, keepdims=True) for c in cams]
+    expect = np.where((cloud.points[:, 0] < -0.1)[:, None], to[0], to[1])
+    both = np.abs(cloud.points[:, 0]) < 0.09
+    mean = to[0][both] + to[1][both]
+    expect[both] = mean / np.linalg.norm(mean, axis=1, keepdims=True)
+    clear = np.abs(np.abs(cloud.points[:, 0]) - 0.1) > 0.02  # voxels on the strip's edge mix both
+    angle = np.degrees(np.arccos(np.clip(np.sum(cloud.sightlines * expect, axis=1), -1, 1)))
+    assert both.sum() > 50 and angle[clear].max() < 0.5
 
 
 def test_kabsch_and_icp_recover_a_rigid_motion():
