@@ -98,6 +98,8 @@ VIS_SLACK = 0.5
 # Pairs beyond this many robust standard deviations of the warm-up's residuals are outliers (the
 # 3σ rule; :func:`residual_gate`).
 PLANE_GATE_SIGMAS = 3.0
+# Points per step that estimate a part's far-side thickness (a median over all steps).
+THICKNESS_SAMPLE = 500
 HESSIANS = ("exact", "gauss_newton", "flat", "lbfgs")
 # Bounds of the mass and inertia ratios (the mesh's mass properties are a guess, not that bad).
 RATIO_BOUNDS = (MIN_COM_SCALE, 50.0)
@@ -379,15 +381,31 @@ def correspondences(data: ScrewData, state: ScrewState, size: int, seed: int = 0
     out = {}
     for p, (link, obs) in enumerate(data.observed.items()):
         Ts = transforms_world0_t(model, link, state.q[cols])
-        items = []
         seen = data.sightlines[link] if data.sightlines is not None else [None] * len(obs)
+        blocks = []
         for s, (pts, sight) in enumerate(zip(obs, seen)):
             pts = np.zeros((0, 3)) if pts is None else pts
             pick = fixed_subsample(pts, size, seed + 1000 * p + s)
-            items.append(correspond(pts[pick], Ts[s], data.surfaces[link], data.gate, size, delta, plane_gate,
-                                    None if sight is None else sight[pick]))
-        out[link] = items
+            blocks.append((pts[pick], Ts[s], None if sight is None else sight[pick]))
+        thickness = far_side_thickness(data.surfaces[link], blocks, delta) if data.sightlines is not None else None
+        out[link] = [correspond(pts, T, data.surfaces[link], data.gate, size, delta, plane_gate, sight, thickness)
+                     for pts, T, sight in blocks]
     return out
+
+
+def far_side_thickness(surface: SurfaceModel, blocks: list, delta: float) -> float:
+    """A part's thickness [m] as a slab (:func:`~.visual.correspond`): the median depth of the
+    points on its far side behind the modelled surface.  ``blocks``: per step (observed points,
+    motion, sightlines).  Pairs are made without gates, which would cut the depth distribution
+    short.  At least 0; 0 when no point is on the far side."""
+    # a median needs far fewer points than the fit: every k-th point, at most THICKNESS_SAMPLE
+    strided = [slice(None, None, max(1, len(pts) // THICKNESS_SAMPLE)) for pts, _, _ in blocks]
+    corr = [correspond(pts[k][:THICKNESS_SAMPLE], T, surface, np.inf, THICKNESS_SAMPLE, delta,
+                       sightlines=sight[k][:THICKNESS_SAMPLE], thickness=0.0)
+            for k, (pts, T, sight) in zip(strided, blocks)]
+    # r = n·(x − y₀): the depth of the back-moved point y₀ behind its nearest surface point x
+    depth = np.concatenate([c.residuals[c.far_side & (c.weights > 0)] for c in corr])
+    return max(0.0, float(np.median(depth))) if depth.size else 0.0
 
 
 def residual_gate(data: ScrewData, corr: dict[str, list[Correspondences]]) -> float:

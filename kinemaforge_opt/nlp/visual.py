@@ -30,6 +30,7 @@ numpy arrays; :func:`point_to_plane` and :func:`pseudo_huber` accept casadi symb
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import casadi as ca
@@ -50,6 +51,11 @@ class SurfaceModel:
     points: np.ndarray
     normals: np.ndarray
     oriented: bool = False
+
+    @functools.cached_property
+    def tree(self) -> cKDTree:
+        """Nearest-neighbour index of ``points`` (built once)."""
+        return cKDTree(self.points)
 
 
 def surface_model(points_world0: np.ndarray, spacing: float, name: str, max_points: int = 4000,
@@ -103,8 +109,9 @@ def point_to_plane(T_world0_t, x0, n0, y):
 class Correspondences:
     """For one part and one time step: observed points (3, N) [m], their surface points and
     normals (3, N) at the zero configuration, gate weights (N,) (0 = rejected or padding), IRLS
-    weights (N,), the moment matrix H (13, 13) of the gated, IRLS-weighted pairs and the
-    point-to-plane residuals (N,) [m] under the motion the pairs were made at."""
+    weights (N,), the moment matrix H (13, 13) of the gated, IRLS-weighted pairs, the
+    point-to-plane residuals (N,) [m] under the motion the pairs were made at, and which pairs
+    are with the far side of the surface (N,) bool (see :func:`correspond`)."""
 
     observed: np.ndarray
     targets: np.ndarray
@@ -113,6 +120,7 @@ class Correspondences:
     irls: np.ndarray
     H: np.ndarray
     residuals: np.ndarray
+    far_side: np.ndarray
 
 
 def linear_rows(observed: np.ndarray, targets: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -141,41 +149,52 @@ def fixed_subsample(points: np.ndarray, n: int, seed: int) -> np.ndarray:
 
 def correspond(observed_world: np.ndarray, T_world0_t: np.ndarray, surface: SurfaceModel, gate: float,
                size: int, delta: float, plane_gate: float = np.inf,
-               sightlines: np.ndarray | None = None) -> Correspondences:
+               sightlines: np.ndarray | None = None, thickness: float | None = None) -> Correspondences:
     """Nearest surface point of each observed point (M, 3) moved back to the zero configuration by
     ``T_world0_t``⁻¹ (4, 4); pairs farther than ``gate`` [m], or off the point's tangent plane by
-    more than ``plane_gate`` [m], get weight 0, and so do pairs whose surface point, moved, faces
-    away from the cameras that saw the observed point (``sightlines`` (M, 3), unit vectors towards
-    them; needs an oriented surface).  Padded with zero weights to ``size`` columns.
+    more than ``plane_gate`` [m], get weight 0.  Padded with zero weights to ``size`` columns.
     IRLS weights of the pseudo-Huber loss of width ``delta`` [m] at ``T_world0_t``.
 
-    Why the back-face test: a seen surface faces its camera.  Without it an opened door's inner
-    face, which the zero-step model lacks, pairs with the front face a door thickness away and
-    pulls the hinge towards the cameras (protocol_refrigerator_0: 2.2 cm)."""
+    The far side: a seen surface faces the camera, so an observed point whose nearest surface
+    point, moved, faces away from the cameras that saw it (``sightlines`` (M, 3), unit vectors
+    towards them; needs an oriented surface) lies on a side of the part the model lacks — an
+    opened door's inner face, a lid's underside.  Modelled as a slab, that side is the tangent
+    plane moved ``thickness`` [m] into the part; with ``thickness`` None such pairs get weight 0.
+    Paired with the front face instead, they pulled protocol_refrigerator_0's hinge 2.2 cm
+    towards the cameras; left out, an opened laptop lid, seen only from below, kept 11 of 4000
+    pairs."""
     m = len(observed_world)
     if m > size:
         raise ValueError(f"{m} observed points exceed the block size {size}")
     R, p = T_world0_t[:3, :3], T_world0_t[:3, 3]
     back = (observed_world - p) @ R  # R^T (y - p), row-wise
-    d, idx = cKDTree(surface.points).query(back) if m else (np.zeros(0), np.zeros(0, dtype=int))
+    d, idx = surface.tree.query(back) if m else (np.zeros(0), np.zeros(0, dtype=int))
+    targets = surface.points[idx]
+    keep = np.ones(m, dtype=bool)
+    far = np.zeros(size, dtype=bool)
+    if sightlines is not None and surface.oriented and m:
+        # n·(Rᵀ s) = (R n)·s < 0: the moved surface point faces away from the camera
+        far[:m] = np.sum(surface.normals[idx] * (sightlines @ R), axis=1) < 0
+        if thickness is None:
+            keep = ~far[:m]
+        else:  # the far side: the surface moved ``thickness`` into the part
+            targets = targets - thickness * far[:m, None] * surface.normals[idx]
+            d = np.where(far[:m], np.linalg.norm(back - targets, axis=1), d)
     obs = np.zeros((3, size))
     tgt = np.zeros((3, size))
     nrm = np.zeros((3, size))
     w = np.zeros(size)
     obs[:, :m] = observed_world.T
-    tgt[:, :m] = surface.points[idx].T
+    tgt[:, :m] = targets.T
     nrm[:, :m] = surface.normals[idx].T
     if m < size:  # padding: unit normals keep the residual finite
         nrm[0, m:] = 1.0
     A = linear_rows(obs, tgt, nrm)
     r = A @ z_vector(T_world0_t)
-    keep = (d <= gate) & (np.abs(r[:m]) <= plane_gate)
-    if sightlines is not None and surface.oriented and m:
-        # (R n)·s ≥ 0 ⇔ n·(Rᵀ s) ≥ 0: the moved surface point faces the camera
-        keep &= np.sum(surface.normals[idx] * (sightlines @ R), axis=1) >= 0
+    keep &= (d <= gate) & (np.abs(r[:m]) <= plane_gate)
     w[:m] = keep.astype(float)
     irls = w / np.sqrt(1.0 + (r / delta) ** 2)
-    return Correspondences(obs, tgt, nrm, w, irls, (A * irls[:, None]).T @ A, r)
+    return Correspondences(obs, tgt, nrm, w, irls, (A * irls[:, None]).T @ A, r, far)
 
 
 def robust_value(c: Correspondences, T_world0_t: np.ndarray, delta: float) -> float:
