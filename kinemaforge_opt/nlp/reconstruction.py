@@ -184,7 +184,7 @@ class ScrewData:
     gate: correspondence rejection distance [m].  wrenches: recorded forces or None.
     pushed_link: (len(wrenches.t),) name of the link the force acts on per sample ("" = none).
     sightlines: like ``observed``, per point the unit vector towards the cameras that saw it, or
-    None (no back-face test, :func:`~.visual.correspond`).
+    None (no far-side test, :func:`~.visual.correspond`).
     """
 
     model: ArticulatedModel
@@ -209,11 +209,14 @@ class ScrewData:
                 raise DataError(f"part {link!r}: {len(obs)} observation steps, expected {T}")
             if self.sightlines is not None:
                 seen = self.sightlines.get(link, [])
-                rows = lambda a: 0 if a is None else len(a)  # noqa: E731
-                if len(seen) != T or any(rows(o) != rows(v) for o, v in zip(obs, seen)):
+                if len(seen) != T or any(_rows(o) != _rows(v) for o, v in zip(obs, seen)):
                     raise DataError(f"part {link!r}: its sightlines do not match its observed points step by step")
         if self.wrenches is not None and (self.pushed_link is None or len(self.pushed_link) != self.wrenches.t.size):
             raise DataError("wrenches need pushed_link: one link name per wrench sample")
+
+
+def _rows(a: np.ndarray | None) -> int:
+    return 0 if a is None else len(a)
 
 
 @dataclass
@@ -402,7 +405,7 @@ def far_side_thickness(surface: SurfaceModel, blocks: list, delta: float) -> flo
     strided = [slice(None, None, max(1, len(pts) // THICKNESS_SAMPLE)) for pts, _, _ in blocks]
     corr = [correspond(pts[k][:THICKNESS_SAMPLE], T, surface, np.inf, THICKNESS_SAMPLE, delta,
                        sightlines=sight[k][:THICKNESS_SAMPLE], thickness=0.0)
-            for k, (pts, T, sight) in zip(strided, blocks)]
+            for k, (pts, T, sight) in zip(strided, blocks) if sight is not None and len(pts)]
     # r = n·(x − y₀): the depth of the back-moved point y₀ behind its nearest surface point x
     depth = np.concatenate([c.residuals[c.far_side & (c.weights > 0)] for c in corr])
     return max(0.0, float(np.median(depth))) if depth.size else 0.0

@@ -45,7 +45,7 @@ from ..errors import DataError
 class SurfaceModel:
     """A part's surface at the zero configuration: points (K, 3) [m] and unit normals (K, 3),
     world frame.  oriented: the normals point out of the part, towards the cameras that saw the
-    points (else their sign is arbitrary and no back-face test applies)."""
+    points (else their sign is arbitrary and no far-side test applies)."""
 
     name: str
     points: np.ndarray

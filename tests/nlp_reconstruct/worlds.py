@@ -178,7 +178,7 @@ def seen_door_data(true: ArticulatedModel, init: ArticulatedModel, cameras: np.n
     each face only the steps it faces a camera (a convex slab hides nothing else), 400 points per
     step with Gaussian noise ``sigma`` [m], each with its sightline (the mean unit vector towards
     the cameras it faces).  The surface model is what the zero step shows, its normals facing the
-    cameras, as perception builds it.  With ``sightlines`` False the data carry none (no back-face
+    cameras, as perception builds it.  With ``sightlines`` False the data carry none (no far-side
     test).  Returns (ScrewData, true q (8,))."""
     times = np.linspace(0.0, 2.0, 8)
     q = 1.4 * np.sin(0.7 * times)
