@@ -1203,9 +1203,13 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                 cols = np.searchsorted(state.t, data.times)
                 shift = CubicSpline(data.times, start.q - state.q[cols], axis=0)
                 start = dataclasses.replace(start, t=state.t, q=state.q + shift(state.t), v=state.v)
-            sp_al, res_al, _ = run("gravity_aligned", corr_al, sp.use_dyn, held, converged_only=True, start=start,
-                                   aligned=rows, accept=lambda r: prefer_aligned(j_free, j_aligned(r), n_res, saved),
-                                   stage_options=sp.options)
+            accept = lambda r: prefer_aligned(j_free, j_aligned(r), n_res, saved)  # noqa: E731
+            sp_al, res_al, iterate = run("gravity_aligned", corr_al, sp.use_dyn, held, converged_only=True, start=start,
+                                         aligned=rows, accept=accept, stage_options=sp.options)
+            if not res_al.success and iterate is not None:
+                # stopped at max_iter: continued once, warm, as the dense stages are (run_dense)
+                sp_al, res_al, _ = run("gravity_aligned_continued", corr_al, sp.use_dyn, held, converged_only=True,
+                                       start=iterate, aligned=rows, accept=accept, stage_options=sp.options, warm=res_al)
             ok = stages[-1]["accepted"]
             tested = "axes: " + ", ".join(f"{name} {aligned[name][0]}" for name in names)
             if res_al.success:

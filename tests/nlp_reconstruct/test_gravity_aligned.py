@@ -136,3 +136,30 @@ def test_one_askew_hinge_does_not_hold_back_a_plumb_one():
     assert axes_notes[2].startswith("axes: hinge_b plumb") and axes_notes[2].endswith("refused")
     assert np.degrees(axis_angle_error(r.model.joint("hinge_a").axis, plumb)) < 1e-6
     assert np.degrees(axis_angle_error(r.model.joint("hinge_b").axis, tilted)) < 0.1
+
+
+def test_an_aligned_fit_stopped_at_max_iter_is_continued_from_its_iterate(monkeypatch):
+    """The aligned fit, stopped after two iterations, is continued once, warm, from its last
+    iterate (as the dense stages are): the continuation converges and the plumb axis is kept,
+    exactly plumb.  Without the continuation the test is refused as "did not converge"."""
+    from kinemaforge_opt.nlp import reconstruction as reco
+
+    true, data = _door_data(np.array([0.0, 0.0, 1.0]))
+    build = reco.build_screw_problem
+
+    def build_and_stop_cold_aligned_fits(data, options, state, corr, dense, held, aligned):
+        # every aligned solve not warm-started stops after two iterations (the settling rounds
+        # too, which are kept as they stop)
+        sp = build(data, options, state, corr, dense, held, aligned)
+        if aligned is not None:
+            solve = sp.problem.solve
+            sp.problem.solve = lambda **kw: solve(**{**kw, "max_iter": 2 if kw.get("warm") is None else kw["max_iter"]})
+        return sp
+
+    monkeypatch.setattr(reco, "build_screw_problem", build_and_stop_cold_aligned_fits)
+    r = refine_screws(data, ScrewOptions(dyn=False))
+    stages = {s["stage"]: s for s in r.stages}
+    assert not stages["gravity_aligned"]["success"]
+    assert stages["gravity_aligned_continued"]["success"] and stages["gravity_aligned_continued"]["accepted"]
+    assert any(n.startswith("axes: hinge plumb") and n.endswith("kept") for n in r.notes)
+    assert _axis_error_deg(r.model, true) < 1e-6
