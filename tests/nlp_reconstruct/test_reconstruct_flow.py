@@ -30,7 +30,8 @@ def test_nlp_results_reach_the_urdf_and_the_document(tiny_case, tmp_path):
     nlp = doc["nlp"]
     assert nlp["enabled"] and isinstance(nlp["success"], bool) and nlp["iterations"] > 0
     assert set(nlp["terms"]) == {"vis", "dyn", "energy", "inertia_prior"} and nlp["terms"]["vis"] is not None
-    assert [s["stage"] for s in nlp["stages"]][-1] in ("full", "full_reweighted", "full_refit", "gravity_aligned")
+    assert [s["stage"] for s in nlp["stages"]][-1] in ("full", "full_reweighted", "full_refit", "gravity_aligned",
+                                                       "gravity_aligned_continued")
     assert doc["timing_s"]["nlp"] > 0
     # the URDF's joints are the document's joints (world axis and origin at q = 0)
     model = read_urdf(out / "model.urdf")
