@@ -1196,6 +1196,10 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                 return (vis_al + non_visual(r, n_al)) / n_res
 
             j_free = score_free / n_res
+
+            def accept(r) -> bool:
+                return prefer_aligned(j_free, j_aligned(r), n_res, saved)
+
             if sp.use_dyn:
                 # the free fit's dense states, q shifted by what settling moved at the frames and v
                 # kept (the shift's derivative added the per-frame jitter to v: refrigerator_1's
@@ -1203,7 +1207,6 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                 cols = np.searchsorted(state.t, data.times)
                 shift = CubicSpline(data.times, start.q - state.q[cols], axis=0)
                 start = dataclasses.replace(start, t=state.t, q=state.q + shift(state.t), v=state.v)
-            accept = lambda r: prefer_aligned(j_free, j_aligned(r), n_res, saved)  # noqa: E731
             sp_al, res_al, iterate = run("gravity_aligned", corr_al, sp.use_dyn, held, converged_only=True, start=start,
                                          aligned=rows, accept=accept, stage_options=sp.options)
             if not res_al.success and iterate is not None:
