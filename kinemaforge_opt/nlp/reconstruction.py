@@ -214,6 +214,10 @@ class ScrewData:
         if self.wrenches is not None and (self.pushed_link is None or len(self.pushed_link) != self.wrenches.t.size):
             raise DataError("wrenches need pushed_link: one link name per wrench sample")
 
+    def sightlines_of(self, link: str) -> list[np.ndarray | None]:
+        """``link``'s sightlines per step (all None when the data carry none)."""
+        return self.sightlines[link] if self.sightlines is not None else [None] * len(self.observed[link])
+
 
 def _rows(a: np.ndarray | None) -> int:
     return 0 if a is None else len(a)
@@ -384,14 +388,15 @@ def correspondences(data: ScrewData, state: ScrewState, size: int, seed: int = 0
     out = {}
     for p, (link, obs) in enumerate(data.observed.items()):
         Ts = transforms_world0_t(model, link, state.q[cols])
-        seen = data.sightlines[link] if data.sightlines is not None else [None] * len(obs)
         blocks = []
-        for s, (pts, sight) in enumerate(zip(obs, seen)):
+        for s, (pts, sight) in enumerate(zip(obs, data.sightlines_of(link))):
             pts = np.zeros((0, 3)) if pts is None else pts
             pick = fixed_subsample(pts, size, seed + 1000 * p + s)
             blocks.append((pts[pick], Ts[s], None if sight is None else sight[pick]))
-        thickness = far_side_thickness(data.surfaces[link], blocks, delta) if data.sightlines is not None else None
-        out[link] = [correspond(pts, T, data.surfaces[link], data.gate, size, delta, plane_gate, sight, thickness)
+        surface = data.surfaces[link]
+        # only an oriented surface has a far side (correspond ignores the thickness otherwise)
+        thickness = far_side_thickness(surface, blocks, delta) if data.sightlines is not None and surface.oriented else None
+        out[link] = [correspond(pts, T, surface, data.gate, size, delta, plane_gate, sight, thickness)
                      for pts, T, sight in blocks]
     return out
 
@@ -1334,8 +1339,7 @@ def refused_surfaces(data: ScrewData, state: ScrewState) -> ScrewData:
     surfaces = {}
     for link, obs in data.observed.items():
         Ts = transforms_world0_t(model, link, state.q[cols])
-        seen = data.sightlines[link] if data.sightlines is not None else [None] * len(obs)
-        steps = [(pts, sight, T) for pts, sight, T in zip(obs, seen, Ts) if pts is not None and len(pts)]
+        steps = [(pts, sight, T) for pts, sight, T in zip(obs, data.sightlines_of(link), Ts) if pts is not None and len(pts)]
         if not steps:
             surfaces[link] = data.surfaces[link]
             continue

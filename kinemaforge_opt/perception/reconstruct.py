@@ -380,12 +380,13 @@ def screw_data(per: Perception, seq, model: ArticulatedModel, lines: dict[str, J
                clouds_world: dict[str, np.ndarray], labels: list[np.ndarray]) -> ScrewData:
     """The NLP's inputs from the perception and the closed-form model (see :class:`ScrewData`):
     observed points per moving part and step with their sightlines, surface models at the zero
-    configuration (the zero step's points, normals from local planes facing the cameras), the Huber width = the voxel edge (the spacing of the
-    fused points, which bounds the point-to-plane misfit of a sampled surface) and the gate = two
-    ICP inlier distances."""
+    configuration (the zero step's points, normals from local planes facing the cameras), the
+    Huber width = the voxel edge (the spacing of the fused points, which bounds the
+    point-to-plane misfit of a sampled surface) and the gate = two ICP inlier distances."""
     moving = [j.child for j in model.movable_joints]
-    observed = {p: [c.points[lab == p] for c, lab in zip(per.clouds, labels)] for p in moving}
-    sightlines = {p: [c.sightlines[lab == p] for c, lab in zip(per.clouds, labels)] for p in moving}
+    masks = {p: [lab == p for lab in labels] for p in moving}
+    observed = {p: [c.points[m] for c, m in zip(per.clouds, masks[p])] for p in moving}
+    sightlines = {p: [c.sightlines[m] for c, m in zip(per.clouds, masks[p])] for p in moving}
     q0 = np.column_stack([_filled(lines[j.name].q, per.times) for j in model.movable_joints]) if moving else np.zeros((per.times.size, 0))
     # Surface models from the zero step's own points (at q = 0 by definition): the fused cloud was
     # moved by the per-step tracks, whose errors blur it (on protocol_cabinet_0 the NLP on the
