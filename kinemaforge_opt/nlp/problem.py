@@ -104,6 +104,10 @@ class Problem:
         v.init = np.broadcast_to(np.asarray(value, dtype=float).reshape(-1, order="F"), v.init.shape).copy()
 
     # --- inspection -----------------------------------------------------------------------
+    def initial(self, name: str) -> np.ndarray:
+        """The initial guess of variable ``name``, in its declared shape."""
+        return self._vars[name].init.reshape(self._shapes[name], order="F").copy()
+
     @property
     def terms(self) -> dict[str, list[str]]:
         """Names of the variables, costs and constraints."""

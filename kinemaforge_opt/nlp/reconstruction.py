@@ -299,16 +299,37 @@ class ScrewResult:
 # --- helpers ---------------------------------------------------------------------------------
 
 
-def _grid(times: np.ndarray, substep_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Grid (G,) subdividing every frame interval into steps <= substep_s, and the frame columns."""
-    pieces, cols, c = [], [], 0
+def _grid(times: np.ndarray, substep_s: float, breaks: np.ndarray = np.zeros(0)) -> tuple[np.ndarray, np.ndarray]:
+    """Grid (G,) subdividing every frame interval into steps <= substep_s, and the frame columns.
+
+    breaks: times [s] the grid must also hold (where the applied force starts, ends or moves to
+    another link, :func:`force_breaks`); a break nearer than ``substep_s`` / 20 to a frame or to an
+    earlier break is left out."""
+    min_step = substep_s / 20
+    pieces, cols = [], []
     for a, b in zip(times[:-1], times[1:]):
-        m = max(1, int(np.ceil((b - a) / substep_s - 1e-9)))
-        pieces.append(np.linspace(a, b, m + 1)[:-1])
-        cols.append(c)
-        c += m
-    cols.append(c)
+        cols.append(sum(p.size for p in pieces))
+        knots = [a]
+        for t in np.sort(breaks[(breaks > a + min_step) & (breaks < b - min_step)]):
+            if t - knots[-1] >= min_step:
+                knots.append(float(t))
+        knots.append(b)
+        for lo, hi in zip(knots[:-1], knots[1:]):
+            m = max(1, int(np.ceil((hi - lo) / substep_s - 1e-9)))
+            pieces.append(np.linspace(lo, hi, m + 1)[:-1])
+    cols.append(sum(p.size for p in pieces))
     return np.concatenate(pieces + [times[-1:]]), np.asarray(cols)
+
+
+def force_breaks(data: ScrewData) -> np.ndarray:
+    """Times [s] where the recorded force, as the NLP reads it (:func:`_wrench_at`), kinks or
+    jumps: both samples around each change of pushed link (a contact's force ramps between
+    them).  Hermite-Simpson integrates a force linear over an interval exactly; across an end of a
+    push it loses part of the push's last impulse."""
+    if data.wrenches is None:
+        return np.zeros(0)
+    change = np.flatnonzero(data.pushed_link[1:] != data.pushed_link[:-1])
+    return np.unique(np.asarray(data.wrenches.t, dtype=float)[np.r_[change, change + 1]])
 
 
 def initial_state(data: ScrewData) -> ScrewState:
@@ -485,16 +506,24 @@ def _applied_force(model, dyn, theta, axis_of, pitch_of, q, p, f, sel, pushed: l
 
 def _wrench_at(data: ScrewData, t: np.ndarray, pushed: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Force application point (3, len(t)) [m], force (3, len(t)) [N] and link selector
-    (len(pushed), len(t)) at times ``t`` (linear interpolation; the selector takes the nearest
-    sample's link)."""
+    (len(pushed), len(t)) at times ``t``: the samples' first-order hold (as the verifier's replay
+    applies them).  Between a sample on a link and one on none the force ramps to the second's
+    (nothing) on the first's link and point, so a contact's force is continuous: it kinks at the
+    samples :func:`force_breaks` names and jumps only where one link's contact gives way to
+    another's."""
     w = data.wrenches
     if w is None:
         z = np.zeros((3, t.size))
         return z, z.copy(), np.zeros((len(pushed), t.size))
+    last = w.t.size - 1
+    before = np.clip(np.searchsorted(w.t, t, side="right") - 1, 0, last)
+    after = np.clip(before + 1, 0, last)
+    on = np.where(data.pushed_link[before] != "", before, after)  # the sample whose contact this is
     p = np.array([np.interp(t, w.t, c) for c in w.points_world.T])
+    lone = (data.pushed_link[before] == "") != (data.pushed_link[after] == "")  # a contact's first or last ramp
+    p[:, lone] = w.points_world[on[lone]].T
     f = np.array([np.interp(t, w.t, c, left=0.0, right=0.0) for c in w.forces_world.T])
-    near = np.clip(np.searchsorted(w.t, t), 0, w.t.size - 1)
-    sel = np.array([(data.pushed_link[near] == link).astype(float) for link in pushed]).reshape(len(pushed), t.size)
+    sel = np.array([(data.pushed_link[on] == link).astype(float) for link in pushed]).reshape(len(pushed), t.size)
     return p, f, sel
 
 
@@ -603,7 +632,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
 
     # grid and initial states
     if use_dyn:
-        t_grid, frame_cols = _grid(data.times, options.substep_s)
+        t_grid, frame_cols = _grid(data.times, options.substep_s, force_breaks(data))
     else:
         t_grid, frame_cols = data.times.copy(), np.arange(data.times.size)
     if state.t.size == t_grid.size and np.allclose(state.t, t_grid):
