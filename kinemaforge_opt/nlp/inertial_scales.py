@@ -13,8 +13,9 @@ centre of mass off by a few millimetres) cannot be fitted.  Here the ratios are 
   s_c = (r_a I_a − r_m m d²) / (aᵀ I_c a).
 
 Both enter the Pinocchio dynamic parameters (about the link origin, on the joint line) linearly:
-π' = [r_m m, r_m m c, s_c I_c + r_m m S(c)], S(c) = |c|² 1 − c cᵀ, so the NLP's parameter map
-stays linear.  π' is a physical rigid body while s_c ≥ 0 (a scaled inertia about the centre of
+π' = [r_m m, r_m m c, s_c I_c + r_m m S(c)], S(c) = |c|² 1 − c cᵀ.  When the NLP moves a joint
+line, the link frame moves with it but the body stays where the points put it: c becomes c − δ
+(δ the frame's displacement) and s_c keeps the value computed where the body was measured.  π' is a physical rigid body while s_c ≥ 0 (a scaled inertia about the centre of
 mass plus a point mass): the NLP constrains s_c ≥ MIN_COM_SCALE (``com_inertia_floor``).
 
 A prismatic joint's child (or a link without an axis of its own) keeps one ratio: its inertia
@@ -81,30 +82,36 @@ def com_scale(inertial: Inertial, axis: np.ndarray, mass_ratio, inertia_ratio):
     return (inertia_ratio * ai.total - mass_ratio * ai.arm) / ai.own
 
 
-def scaled_parameters(inertial: Inertial, axis: np.ndarray | None, mass_ratio, inertia_ratio=None) -> list:
+def scaled_parameters(inertial: Inertial, axis: np.ndarray | None, mass_ratio, inertia_ratio=None,
+                      shift=None) -> list:
     """The 10 Pinocchio dynamic parameters [m, m c, Ixx, Ixy, Iyy, Ixz, Iyz, Izz] (about the link
-    origin) of the scaled body, as a list of expressions linear in the ratios.  Without an axis
-    (or ``inertia_ratio`` None) every parameter scales with ``mass_ratio``."""
-    pi = inertial.dynamic_parameters()
-    if axis is None or inertia_ratio is None:
-        return [mass_ratio * float(p) for p in pi]
-    m, c = inertial.mass, inertial.com
-    S = m * (np.dot(c, c) * np.eye(3) - np.outer(c, c))  # point-mass inertia about the origin
-    s_c = com_scale(inertial, axis, mass_ratio, inertia_ratio)
-    Ic = inertial.inertia
+    origin) of the scaled body, as a list of expressions in the ratios (numbers or casadi symbols).
+    Without an axis (or ``inertia_ratio`` None) every parameter scales with ``mass_ratio``.
+
+    shift: (3,) displacement of the link frame since ``inertial`` was written [m, link axes]
+    (numbers or a casadi column), or None: the body stays where it is and its centre of mass sits
+    at c − shift in the moved frame.  The ratios' shares (s_c) stay those of ``inertial``."""
+    m, c, Ic = inertial.mass, inertial.com, inertial.inertia
+    s_c = mass_ratio if axis is None or inertia_ratio is None else com_scale(inertial, axis, mass_ratio, inertia_ratio)
+    cs = [float(c[i]) - (0.0 if shift is None else shift[i]) for i in range(3)]
+    c2 = cs[0] * cs[0] + cs[1] * cs[1] + cs[2] * cs[2]
+    # point-mass inertia about the origin, m (|c|² 1 − c cᵀ), per entry
+    S = lambda i, j: m * ((c2 if i == j else 0.0) - cs[i] * cs[j])  # noqa: E731
     idx = [(0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2)]
-    return ([mass_ratio * m] + [mass_ratio * float(m * ci) for ci in c]
-            + [s_c * float(Ic[i, j]) + mass_ratio * float(S[i, j]) for i, j in idx])
+    return ([mass_ratio * m] + [mass_ratio * m * ci for ci in cs]
+            + [s_c * float(Ic[i, j]) + mass_ratio * S(i, j) for i, j in idx])
 
 
 def scaled_inertial(inertial: Inertial, axis: np.ndarray | None, mass_ratio: float,
-                    inertia_ratio: float | None = None) -> Inertial:
-    """The scaled body as an :class:`Inertial` (centre of mass unchanged).  Ratios that leave no
-    positive inertia about the centre of mass (s_c ≤ 0: the axis inertia below the point mass's)
-    raise :class:`ModelError`."""
+                    inertia_ratio: float | None = None, reference: Inertial | None = None) -> Inertial:
+    """The scaled body as an :class:`Inertial` (centre of mass unchanged).  reference: the body
+    the ratios were fitted on, with ``axis`` in its frame (default ``inertial``); the rotational
+    inertia scale s_c is computed on it, so the same ratios give the same body wherever its frame
+    sits.  Ratios that leave no positive inertia about the centre of mass (s_c ≤ 0: the axis
+    inertia below the point mass's) raise :class:`ModelError`."""
     if axis is None or inertia_ratio is None:
         return dataclasses.replace(inertial, mass=inertial.mass * mass_ratio, inertia=inertial.inertia * mass_ratio)
-    s_c = float(com_scale(inertial, axis, mass_ratio, inertia_ratio))
+    s_c = float(com_scale(inertial if reference is None else reference, axis, mass_ratio, inertia_ratio))
     if s_c <= 0:
         raise ModelError(f"inertia_ratio {inertia_ratio:.4g} with mass_ratio {mass_ratio:.4g} leaves the body an "
                          f"inertia about its centre of mass scaled by {s_c:.4g}; expected > 0 (a physical body)")

@@ -53,7 +53,7 @@ from scipy.interpolate import CubicSpline
 
 from ..errors import DataError, KinemaforgeError, ModelError
 from ..io.sequence import Wrenches
-from ..model import ArticulatedModel, JointLimits
+from ..model import ArticulatedModel, Inertial, JointLimits
 from ..physics.effects import EFFECTS
 from ..symbolic import build_dynamics
 from .inertial_scales import MIN_COM_SCALE, com_scale, has_axis_ratio, link_axis, scaled_inertial, scaled_parameters
@@ -272,7 +272,7 @@ class ScrewResult:
     ``vis`` the robust sum Σ ρ_δ(r)/δ² over the final correspondences, ``dyn`` the robust sum of
     normalised defects, ``energy`` the soft penalty (× energy_weight) or, for the hard constraint,
     Σ (relative residual)² over the windows.  iterations: IPOPT iterations over all stages.
-    success: every stage converged.  stages: per stage (name, iterations, success, seconds).
+    success: every stage converged (or its continuation did).  stages: per stage (name, iterations, success, seconds).
     fitted: the dynamic parameters the NLP fitted ("damping:<joint>", "coulomb:<joint>",
     "mass_ratio:<link>", "inertia_ratio:<link>").  identified: those of them the data determine
     (status "identified").  When a damping or Coulomb coefficient fitted away from 0 is not
@@ -363,17 +363,54 @@ def state_model(data: ScrewData, state: ScrewState) -> ArticulatedModel:
         model = model.with_joint(j.name, T_parent_joint=T, axis=state.axes[k] / np.linalg.norm(state.axes[k]),
                                  pitch=float(state.pitches[k]) if j.type == "helical" else 0.0,
                                  limits=limits, dynamics=dyn)
-    return with_ratios(model, data.model, state.mass_ratio, state.inertia_ratio)
+    return with_ratios(bodies_kept(model, data.model), data.model, state.mass_ratio, state.inertia_ratio)
 
 
-def with_ratios(model: ArticulatedModel, axes_from: ArticulatedModel, mass_ratio: dict[str, float],
+def frames_at_zero(model: ArticulatedModel) -> dict[str, np.ndarray]:
+    """Link name -> (4, 4) pose of its frame in the root frame at q = 0."""
+    T = {model.root.name: np.eye(4)}
+    for j in model.joints:
+        T[j.child] = T[j.parent] @ j.T_parent_joint
+    return T
+
+
+def bodies_kept(model: ArticulatedModel, reference: ArticulatedModel) -> ArticulatedModel:
+    """``model`` with each link's mass properties those of ``reference``'s link, kept where they
+    are at q = 0 while ``model``'s link frames sit elsewhere (moved joint lines): the centre of
+    mass and rotational inertia re-expressed in the new frame."""
+    T_new, T_ref = frames_at_zero(model), frames_at_zero(reference)
+    for link in model.links:
+        inert = reference.link(link.name).inertial
+        if inert is None:
+            continue
+        T = np.linalg.solve(T_new[link.name], T_ref[link.name])  # reference link frame -> new one
+        R = T[:3, :3]
+        model = model.with_link(link.name, inertial=Inertial(inert.mass, R @ inert.com + T[:3, 3], R @ inert.inertia @ R.T))
+    return model
+
+
+def _frame_shifts(model: ArticulatedModel, origin_vars: dict[str, ca.MX]) -> dict[str, ca.MX]:
+    """Link name -> displacement (3,) of its frame at q = 0 [m, in its own axes] when the joints
+    of ``origin_vars`` (name -> origin (3,) in the parent frame, NLP variables) leave ``model``'s
+    origins: δ_child = δ_parent + R_root_parent (o − o_model), rotated into the child's axes."""
+    T = frames_at_zero(model)
+    moved = {model.root.name: ca.MX.zeros(3)}
+    for j in model.joints:
+        step = 0.0
+        if j.name in origin_vars:
+            step = ca.mtimes(ca.DM(T[j.parent][:3, :3]), origin_vars[j.name] - ca.DM(j.T_parent_joint[:3, 3]))
+        moved[j.child] = moved[j.parent] + step
+    return {l: ca.mtimes(ca.DM(T[l][:3, :3].T), d) for l, d in moved.items()}
+
+
+def with_ratios(model: ArticulatedModel, reference: ArticulatedModel, mass_ratio: dict[str, float],
                 inertia_ratio: dict[str, float]) -> ArticulatedModel:
     """``model`` with each link's mass properties scaled by its ratios (:func:`scaled_inertial`),
-    the inertia ratio taken about the link's joint axis in ``axes_from`` (the model the NLP was
-    built on)."""
+    the ratios' shares computed on ``reference``'s body about its joint axis (the model the NLP
+    was built on; its link frames may differ from ``model``'s only by translations)."""
     for link, r_m in mass_ratio.items():
-        inert = model.link(link).inertial
-        scaled = scaled_inertial(inert, link_axis(axes_from, link), r_m, inertia_ratio.get(link))
+        ref = reference.link(link).inertial
+        scaled = scaled_inertial(model.link(link).inertial, link_axis(reference, link), r_m, inertia_ratio.get(link), ref)
         model = model.with_link(link, inertial=scaled)
     return model
 
@@ -626,8 +663,9 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             free.append(f"{j.name}.origin")
         if j.type == "helical":
             free.append(f"{j.name}.pitch")
-    ratio_links = [l for l in moving_links if model.link(l).inertial is not None and model.link(l).inertial.mass > 0] if fit_dyn else []
-    free += [f"{l}.inertia" for l in ratio_links]
+    body_links = [l for l in moving_links if model.link(l).inertial is not None and model.link(l).inertial.mass > 0] if use_dyn else []
+    ratio_links = body_links if fit_dyn else []
+    free += [f"{l}.inertia" for l in body_links]
     dyn = build_dynamics(model, free=free)
 
     # grid and initial states
@@ -651,6 +689,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
     theta_sx = ca.SX.sym("theta", dyn.theta0.size)
     theta_parts = []
     axis_of, pitch_of = [], []
+    origin_vars = {}
     for k, j in enumerate(joints):
         a_var = prob.variable(f"axis:{j.name}", 3, lower=-1.5, upper=1.5, init=state.axes[k])
         prob.add_constraint(f"unit_axis:{j.name}", ca.sumsqr(a_var) - 1.0)
@@ -663,6 +702,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             a_parent = j.T_parent_joint[:3, :3] @ state.axes[k]
             prob.add_constraint(f"gauge:{j.name}", ca.dot(ca.DM(a_parent), o_var - ca.DM(state.origins[k])))
             theta_parts.append(o_var)
+            origin_vars[j.name] = o_var
         if j.type == "helical":
             p_var = prob.variable(f"pitch:{j.name}", 1, init=state.pitches[k])
             theta_parts.append(p_var)
@@ -670,19 +710,19 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         else:
             pitch_of.append(None)
     ratios = []  # names of the ratio variables (mass_ratio:<l>, inertia_ratio:<l>)
-    for l in ratio_links:
+    shifts = _frame_shifts(model, origin_vars)  # the bodies stay put while the joint lines move
+    for l in body_links:
         inertial, axis = model.link(l).inertial, link_axis(model, l)
-        r_m = prob.variable(f"mass_ratio:{l}", 1, lower=RATIO_BOUNDS[0], upper=RATIO_BOUNDS[1],
-                            init=state.mass_ratio.get(l, 1.0))
-        ratios.append(f"mass_ratio:{l}")
-        r_a = None
-        if has_axis_ratio(inertial, axis):
-            r_a = prob.variable(f"inertia_ratio:{l}", 1, lower=RATIO_BOUNDS[0], upper=RATIO_BOUNDS[1],
-                                init=state.inertia_ratio.get(l, 1.0))
-            ratios.append(f"inertia_ratio:{l}")
-            # the scaled body stays physical: its inertia about the centre of mass stays positive
-            prob.add_constraint(f"com_inertia_floor:{l}", com_scale(inertial, axis, r_m, r_a), MIN_COM_SCALE, np.inf)
-        theta_parts.append(ca.vertcat(*scaled_parameters(inertial, axis, r_m, r_a)))
+        r_m, r_a = state.mass_ratio.get(l, 1.0), state.inertia_ratio.get(l, 1.0) if has_axis_ratio(inertial, axis) else None
+        if l in ratio_links:
+            r_m = prob.variable(f"mass_ratio:{l}", 1, lower=RATIO_BOUNDS[0], upper=RATIO_BOUNDS[1], init=r_m)
+            ratios.append(f"mass_ratio:{l}")
+            if r_a is not None:
+                r_a = prob.variable(f"inertia_ratio:{l}", 1, lower=RATIO_BOUNDS[0], upper=RATIO_BOUNDS[1], init=r_a)
+                ratios.append(f"inertia_ratio:{l}")
+                # the scaled body stays physical: its inertia about the centre of mass stays positive
+                prob.add_constraint(f"com_inertia_floor:{l}", com_scale(inertial, axis, r_m, r_a), MIN_COM_SCALE, np.inf)
+        theta_parts.append(ca.vertcat(*scaled_parameters(inertial, axis, r_m, r_a, shifts[l])))
     use_prior = bool(ratios) and 0 < options.inertia_prior_sigma < np.inf
     theta_mx = ca.vertcat(*theta_parts)
 
@@ -1284,8 +1324,15 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         where = ", ".join(f"{data.times[a]:.2f}-{data.times[b]:.2f} s" for a, b in spans)
         notes.append(f"dyn, energy: stop impacts; the terms leave out {where}")
     return ScrewResult(model, state.q[cols], state, terms, int(sum(s["iterations"] for s in stages)),
-                       all(s["success"] for s in stages), tuple(stages), time.perf_counter() - start,
+                       _all_converged(stages), tuple(stages), time.perf_counter() - start,
                        identified, tuple(notes), identifiability, fitted)
+
+
+def _all_converged(stages: list[dict]) -> bool:
+    """Whether every stage converged, a stage stopped at max_iter counting as converged when its
+    continuation (``<stage>_continued``, the same solve resumed warm) did."""
+    resumed = {s["stage"].removesuffix("_continued") for s in stages if s["stage"].endswith("_continued") and s["success"]}
+    return all(s["success"] or s["stage"] in resumed for s in stages)
 
 
 # The re-estimated defect scales are at least this share of dyn_sigma: a bound on how much more

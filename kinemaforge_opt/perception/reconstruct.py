@@ -416,10 +416,12 @@ def refined_lines(result: ScrewResult, per: Perception, lines: dict[str, JointLi
     return out
 
 
-def _apply_identified(model: ArticulatedModel, records: list[dict], result: ScrewResult) -> ArticulatedModel:
+def _apply_identified(model: ArticulatedModel, records: list[dict], result: ScrewResult,
+                      reference: ArticulatedModel) -> ArticulatedModel:
     """The NLP's damping / Coulomb friction where the data determine it (the others keep the
     nominal value) and its mass and inertia ratios into the rebuilt model and the joint records
-    (``dynamics``)."""
+    (``dynamics``).  reference: the model the NLP was built on (the ratios' shares are its
+    bodies'; the rebuilt model holds the same bodies in frames on the NLP's joint lines)."""
     identified = set(result.identified)
     for j in result.model.movable_joints:
         if f"damping:{j.name}" in identified or f"coulomb:{j.name}" in identified:
@@ -428,7 +430,7 @@ def _apply_identified(model: ArticulatedModel, records: list[dict], result: Scre
                                                                          damping=d.damping, coulomb=d.coulomb))
             rec = next(r for r in records if r["name"] == j.name)
             rec["dynamics"] = {"damping": d.damping, "coulomb": d.coulomb}
-    return with_ratios(model, result.model, result.state.mass_ratio, result.state.inertia_ratio)
+    return with_ratios(model, reference, result.state.mass_ratio, result.state.inertia_ratio)
 
 
 def _line_record(name: str, line: JointLine) -> dict:
@@ -469,7 +471,7 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
                                                                                labels, masses)
     if options is None:
         return model, records, clouds_world, meshes, labels, None, mass_report
-    model = _apply_identified(model, records, result)
+    model = _apply_identified(model, records, result, data.model)
     doc = {
         "enabled": True, "terms": result.terms, "iterations": result.iterations, "success": result.success,
         "time_s": prepare_s + result.time_s, "prepare_s": prepare_s, "solve_s": result.time_s, "fitted": list(result.fitted), "identified": list(result.identified), "notes": list(result.notes),

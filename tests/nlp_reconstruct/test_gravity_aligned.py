@@ -57,7 +57,7 @@ def _door_data(axis_world: np.ndarray, sigma: float = 0.003):
     """:func:`noisy_door_data` of a door on ``axis_world``, the closed form 2° off the truth.
     Returns (true, data)."""
     true = door_model(axis_world, ORIGIN)
-    init = door_model(exp_so3(normalize([1.0, 1.0, 0.0]) * np.radians(2.0)) @ axis_world, ORIGIN + [0.01, -0.008, 0.0])
+    init = door_model(exp_so3(normalize([1.0, 1.0, 0.0]) * np.radians(2.0)) @ axis_world, ORIGIN + [0.01, -0.008, 0.0], body_origin=ORIGIN)
     return true, noisy_door_data(true, init, sigma, delta=sigma)[0]
 
 
@@ -84,7 +84,7 @@ def test_the_plumb_hypothesis_is_judged_on_its_own_correspondences():
     its own motion, with every point left out of the gates charged, it is kept, exactly plumb."""
     true = door_model(np.array([0.0, 0.0, 1.0]), ORIGIN)
     init = door_model(exp_so3(normalize([1.0, 1.0, 0.0]) * np.radians(2.0)) @ np.array([0.0, 0.0, 1.0]),
-                      ORIGIN + [0.01, -0.008, 0.0])
+                      ORIGIN + [0.01, -0.008, 0.0], body_origin=ORIGIN)
     data = noisy_door_data(true, init, 0.006, seed=1, surface_faces=lambda n: n[:, 1] < 0.5, delta=0.006)[0]
     free = refine_screws(data, ScrewOptions(dyn=False, gravity_aligned=False))
     assert _axis_error_deg(free.model, true) > 0.5

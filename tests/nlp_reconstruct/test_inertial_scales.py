@@ -43,6 +43,11 @@ def test_scaled_body_has_the_scaled_moment_and_axis_inertia():
     # the NLP's linear parameter map is pinocchio's dynamic parameters of that body
     pi = pin.Inertia(body.mass, body.com, body.inertia).toDynamicParameters()
     np.testing.assert_allclose(scaled_parameters(inert, axis, 1.3, 1.2), pi, rtol=1e-10, atol=1e-14)
+    # the link frame moved by `shift`, the body left where it was: pinocchio's parameters of the
+    # same body about the moved origin
+    shift = np.array([0.01, -0.02, 0.005])
+    moved = pin.Inertia(body.mass, body.com - shift, body.inertia).toDynamicParameters()
+    np.testing.assert_allclose(scaled_parameters(inert, axis, 1.3, 1.2, shift), moved, rtol=1e-10, atol=1e-14)
     # a lighter axis inertia than the heavier point mass alone allows is no body
     with pytest.raises(ModelError, match="inertia_ratio 0.8 with mass_ratio 1.3 .* expected > 0"):
         scaled_inertial(inert, axis, 1.3, 0.8)

@@ -97,7 +97,7 @@ def test_the_inner_face_of_an_opened_door_is_its_far_side_not_its_front():
     thickness comes out 3.8 cm)."""
     true = door_model(np.array([0.0, 0.0, 1.0]), ORIGIN)
     init = door_model(exp_so3(normalize([1.0, 1.0, 0.0]) * np.radians(2.0)) @ np.array([0.0, 0.0, 1.0]),
-                      ORIGIN + [0.01, -0.008, 0.0])
+                      ORIGIN + [0.01, -0.008, 0.0], body_origin=ORIGIN)
     cameras = np.array([[-1.2, 1.5, 0.6], [1.8, 1.5, 0.6]])
     options = ScrewOptions(dyn=False, gravity_aligned=False)
     blind = refine_screws(seen_door_data(true, init, cameras, 0.006, sightlines=False)[0], options)

@@ -45,12 +45,15 @@ def box_inertial(mass: float, size: np.ndarray, com: np.ndarray) -> Inertial:
 
 
 def door_model(axis_world, origin_world, kind: str = "revolute", damping: float = 0.0, pitch: float = 0.0,
-               gravity=(0.0, 0.0, -9.81), inertial: Inertial | None = None) -> ArticulatedModel:
+               gravity=(0.0, 0.0, -9.81), inertial: Inertial | None = None, body_origin=None) -> ArticulatedModel:
     """Base (the world) + one box door on a joint through ``origin_world`` along ``axis_world``.
     The door's link frame is the joint frame at q = 0 (world-aligned, at the origin).  Its mass
-    properties: a uniform 3 kg slab of size BOX unless ``inertial`` says otherwise.  With gravity
-    along −y (the slab's face normal) the door is a lid: the hinge is horizontal."""
-    center = np.asarray(origin_world) + np.array([BOX[0] / 2 + 0.01, 0.0, 0.0])
+    properties: a uniform 3 kg slab of size BOX beside ``body_origin`` (default the joint origin;
+    a closed form whose joint is off keeps the measured slab where it is) unless ``inertial`` says
+    otherwise.  With gravity along −y (the slab's face normal) the door is a lid: the hinge is
+    horizontal."""
+    body_origin = origin_world if body_origin is None else body_origin
+    center = np.asarray(body_origin) + np.array([BOX[0] / 2 + 0.01, 0.0, 0.0])
     inertial = box_inertial(3.0, BOX, center - origin_world) if inertial is None else inertial
     links = (Link("base"), Link("door", inertial))
     joint = Joint("hinge", kind, "base", "door", make_transform(np.eye(3), np.asarray(origin_world, float)),
