@@ -18,6 +18,7 @@ from kinemaforge_opt.bench.reconstruction import RECO_FULL, _Runs, cache_root, s
 from .reco_sizes import protocol_case
 
 COLUMNS = (("axis_error_deg", "axis °", "{:.2f}"), ("origin_error_m", "origin m", "{:.3f}"),
+           ("inertia_error", "inertia err", "{:.3f}"),
            ("part_iou", "part IoU", "{:.3f}"), ("moving_part_iou", "moving IoU", "{:.3f}"),
            ("drift_1s_m", "1-s drift m", "{:.3f}"), ("drift_50s_m", "50-s drift m", "{:.3f}"),
            ("energy_residual", "energy", "{:.3f}"), ("type_accuracy", "types", "{:.2f}"),

@@ -13,6 +13,7 @@ NOT_AVAILABLE = "not available"
 COLUMNS = (
     ("axis_error_deg", "axis error [deg]", ".2f"),
     ("origin_error_m", "origin error [m]", ".3f"),
+    ("inertia_error", "inertia error", ".3f"),
     ("part_iou", "part IoU", ".3f"),
     ("moving_part_iou", "moving-part IoU", ".3f"),
     ("drift_1s_m", "1-s drift [m]", ".3f"),
@@ -74,7 +75,9 @@ def reconstruction_tables(reco: dict) -> str:
                 f"{size['width']}×{size['height']} px, D435-like noise (the seed paper: 8 views, 640×480).  "
                 "Cells: mean ± std over instances and seeds (n = cases measured).  Axis error: angle between "
                 "estimated and true axis, sign-agnostic; origin error: distance between the estimated and true "
-                "joint lines (revolute only); joints found: share of the true movable joints matched by a "
+                "joint lines (revolute only); inertia error: |M_kk / M_kk,true − 1| of each matched joint, what it "
+                "moves at q = 0 (the inertia of its subtree about the axis, or its mass along a translation), "
+                "mean over the object's joints; joints found: share of the true movable joints matched by a "
                 "movable estimate; part IoU: per-pixel labels vs ground truth, parts matched by the "
                 "Hungarian method, mean over the object's true parts (moving-part IoU: over the parts a joint "
                 "moves, without the static body, whose IoU suffers from any background left unlabelled as "

@@ -377,11 +377,15 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
     org = [s.origin_error_m for s in scores if s.true_type != "prismatic"]
     ver = doc.get("verification") or {}
     drift = {str(k): float(v) for k, v in (ver.get("drift_m") or {}).items() if v is not None}
+    from ..model import read_urdf
+
+    inertia = inertia_errors(r.model, read_urdf(case_root / "ground_truth" / "true_model.urdf"), scores)
     rec.update(
         part_iou=m.mean_iou, iou_per_part=m.iou,
         moving_part_iou=_mean_or_none([m.iou.get(j.child, 0.0) for j in obj_joints if j.type != "fixed"]),
         part_match=m.pred_to_true, labelled_pixels=m.n_pixels,
         axis_error_deg=_mean_or_none(ax), origin_error_m=_mean_or_none(org),
+        inertia_error=_mean_or_none([abs(e) for e in inertia.values()]), inertia_error_per_joint=inertia,
         missed_joints=sum(s.est_joint is None for s in scores),
         joints_found=float(np.mean([s.est_joint is not None for s in scores])) if scores else None,
         type_accuracy=float(np.mean([s.type_correct for s in scores])) if scores else None,
@@ -402,6 +406,24 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
         tc = rec.get("truth_continued_drift_m") or {}
         rec.update(truth_continued_drift_1s_m=tc.get("1"), truth_continued_drift_50s_m=tc.get("50"))
     return rec
+
+
+def inertia_errors(est_model, true_model, scores) -> dict[str, float]:
+    """Per true joint matched with the right type: the relative error of what the estimate's joint
+    moves, M[k, k] at q = 0 (:func:`~kinemaforge_opt.model.pinocchio.joint_space_inertia`: the
+    subtree's inertia about the axis, or its mass along a translation), against the truth's.  A
+    ground-truth check of the mass properties the NLP identifies from the recorded forces."""
+    from ..model.pinocchio import joint_space_inertia
+
+    M_est = joint_space_inertia(est_model, np.zeros(est_model.nq))
+    M_true = joint_space_inertia(true_model, np.zeros(true_model.nq))
+    out = {}
+    for s in scores:
+        if s.est_joint is None or not s.type_correct:
+            continue
+        k_est, k_true = est_model.joint_names.index(s.est_joint), true_model.joint_names.index(s.true_joint)
+        out[s.true_joint] = float(M_est[k_est, k_est] / M_true[k_true, k_true] - 1.0)
+    return out
 
 
 def _mean_or_none(values) -> float | None:
@@ -450,7 +472,7 @@ class _Runs:
         return self.memo[key]
 
 
-METRICS = ("axis_error_deg", "origin_error_m", "part_iou", "moving_part_iou", "drift_1s_m", "drift_50s_m", "energy_residual",
+METRICS = ("axis_error_deg", "origin_error_m", "inertia_error", "part_iou", "moving_part_iou", "drift_1s_m", "drift_50s_m", "energy_residual",
            "joints_found", "type_accuracy", "topology_correct", "truth_drift_1s_m", "truth_drift_50s_m",
            "truth_energy_residual", "truth_continued_drift_1s_m", "truth_continued_drift_50s_m")
 COUNT_FAILURES = ("joints_found", "type_accuracy", "topology_correct")

@@ -72,3 +72,12 @@ def inverse_dynamics(model: ArticulatedModel, q: np.ndarray, v: np.ndarray, a: n
     pm = build_pin_model(model)
     data = pm.createData()
     return np.array([pin.rnea(pm, data, qq, vv, aa) for qq, vv, aa in zip(q, v, a)])
+
+
+def joint_space_inertia(model: ArticulatedModel, q: np.ndarray) -> np.ndarray:
+    """The joint-space inertia matrix M(q) (n, n) [kg m² / kg] (Pinocchio's CRBA, symmetrised):
+    M[k, k] is what joint k moves, the inertia of its subtree about its axis (or its mass along
+    a translation)."""
+    pm = build_pin_model(model)
+    M = pin.crba(pm, pm.createData(), np.asarray(q, dtype=float))
+    return np.triu(M) + np.triu(M, 1).T

@@ -4,6 +4,7 @@ and the tables and plots are written (including "not available" for missing opti
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import types
 
@@ -17,6 +18,7 @@ from kinemaforge_opt.bench.reco_report import NOT_AVAILABLE, reconstruction_tabl
 from kinemaforge_opt.bench.report import write_report
 from kinemaforge_opt.errors import DataError
 from kinemaforge_opt.io.sequence import load_sequence
+from kinemaforge_opt.model import Inertial, read_urdf
 from kinemaforge_opt.spatial import exp_so3, line_distance
 from kinemaforge_opt.synth.case import Case
 from kinemaforge_opt.synth.groundtruth import mjcf_string
@@ -51,10 +53,12 @@ def test_true_joint_lines_agree_with_mujoco(tiny_root):
         assert line_distance(j.axis_world, j.origin_world, data.xaxis[jid], data.xanchor[jid]) < 1e-6
 
 
-def _fake_reconstruction(root, tilt_deg: float, offset_m: float, drop_share: float):
+def _fake_reconstruction(root, tilt_deg: float, offset_m: float, drop_share: float, mass_scale: float = 1.3):
     """A stand-in for reconstruct_sequence built from the ground truth: every joint's axis tilted
-    by ``tilt_deg`` and its line moved ``offset_m`` sideways, parts renamed, and the first
-    ``drop_share`` of each frame's pixels of the first moving part labelled environment."""
+    by ``tilt_deg`` and its line moved ``offset_m`` sideways, parts renamed, the first
+    ``drop_share`` of each frame's pixels of the first moving part labelled environment, and a
+    model that is the true one with its joints renamed and every moving part ``mass_scale`` times
+    as heavy (a rigid body scaled whole)."""
     seq = load_sequence(root / "sequence")
     legend = json.loads((root / "ground_truth" / "case.json").read_text())["label_legend"]
     truth = R.true_joints(root)
@@ -79,8 +83,12 @@ def _fake_reconstruction(root, tilt_deg: float, offset_m: float, drop_share: flo
         pixels[f.index] = (np.column_stack([rows, cols]), names)
     doc = {"joints": joints, "timing_s": {"graph": 0.5, "total": 1.0},
            "verification": {"drift_m": {"1": 0.01, "50": 0.05}, "energy_residual": 0.02}}
-    return types.SimpleNamespace(document=doc, perception=None, labels=None,
-                                 model=types.SimpleNamespace(movable_joints=(1,))), pixels, counts
+    true = read_urdf(root / "ground_truth" / "true_model.urdf")
+    model = dataclasses.replace(true, joints=tuple(dataclasses.replace(j, name="e_" + j.name) for j in true.joints))
+    for j in true.movable_joints:
+        inert = model.link(j.child).inertial
+        model = model.with_link(j.child, inertial=Inertial(mass_scale * inert.mass, inert.com, mass_scale * inert.inertia))
+    return types.SimpleNamespace(document=doc, perception=None, labels=None, model=model), pixels, counts
 
 
 def test_known_errors_are_measured(tiny_root, tmp_path, monkeypatch):
@@ -102,6 +110,7 @@ def test_known_errors_are_measured(tiny_root, tmp_path, monkeypatch):
     assert rec["moving_part_iou"] == pytest.approx((door_iou + len(truth) - 1) / len(truth))
     assert rec["type_accuracy"] == 1.0 and rec["topology_correct"] and rec["joints_found"] == 1.0
     assert rec["drift_1s_m"] == 0.01 and rec["drift_50s_m"] == 0.05 and rec["energy_residual"] == 0.02
+    assert rec["inertia_error"] == pytest.approx(0.3)
 
 
 def test_a_failing_reconstruction_is_a_record(tiny_root, tmp_path, monkeypatch):
@@ -181,7 +190,7 @@ def _summary(**vals):
 
 def test_tables_and_plots(tmp_path):
     size = R.RECO_QUICK
-    ok = _summary(axis_error_deg=1.5, origin_error_m=0.01, part_iou=0.9, drift_1s_m=0.02, drift_50s_m=0.06,
+    ok = _summary(axis_error_deg=1.5, origin_error_m=0.01, inertia_error=0.05, part_iou=0.9, drift_1s_m=0.02, drift_50s_m=0.06,
                   energy_residual=0.1, joints_found=1.0, type_accuracy=1.0, topology_correct=1.0)
     record = {"case": "c", "options": {}, "ok": True, "drift_m": {"1": 0.02, "5": 0.04, "50": 0.06}}
     reco = {
@@ -198,8 +207,8 @@ def test_tables_and_plots(tmp_path):
         "records": [record], "generation_s": 1.0, "total_s": 10.0,
     }
     md = reconstruction_tables(reco)
-    assert "| cabinet | 1 | 1.50 ± 0.00 (1) | 0.010 ± 0.000 (1) | 0.900 ± 0.000 (1) | n/a |" in md
-    assert "| **seed paper (average)** | – | 2.83 | 0.024 | 0.910 | – | 0.041 | 0.104 | 0.019 |" in md
+    assert "| cabinet | 1 | 1.50 ± 0.00 (1) | 0.010 ± 0.000 (1) | 0.050 ± 0.000 (1) | 0.900 ± 0.000 (1) | n/a |" in md
+    assert "| **seed paper (average)** | – | 2.83 | 0.024 | – | 0.910 | – | 0.041 | 0.104 | 0.019 |" in md
     assert f"{NOT_AVAILABLE} (reconstruct_sequence has no option energy)" in md
     assert "| total | 2.00 |" in md
     paths = write_report({"size": "test", "machine": "m", "total_s": 1.0, "reconstruction": reco}, tmp_path)
