@@ -943,6 +943,13 @@ def _energy_scale(model: ArticulatedModel, dyn, q: np.ndarray, v: np.ndarray) ->
     return float(max(np.ptp(E), 1e-9))
 
 
+# IPOPT for a refit started next to its optimum (the aligned fit, from the converged free fit): a
+# monotone barrier from a small mu.  The adaptive barrier's first mu there was ~1 (damping and
+# Coulomb start at their bound 0), its first step went 30 units away and protocol_cabinet_1@s1's
+# plumb fit stopped at 2 × 200 iterations; from mu 1e-4 both plumb doors are kept.
+NEAR_START_IPOPT = {"ipopt.mu_strategy": "monotone", "ipopt.mu_init": 1e-4}
+
+
 def _solver_options(options: ScrewOptions, dense: bool, hess_lag: ca.Function | None = None) -> dict:
     """IPOPT options.  With the dynamics, the mapped MX graph is expanded to SX unless JIT is on:
     the exact Hessian of the mapped ABA intervals evaluated through MX cost ~1 s per iteration
@@ -1108,17 +1115,18 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     opts = dataclasses.replace(options, dyn=want_dense)
 
     def run(name, corr, dense, held=frozenset(), converged_only=False, start=None, aligned=None, accept=None,
-            stage_options=None, warm=None, commit=True):
+            stage_options=None, warm=None, commit=True, near=False):
         """Solve a stage from ``start`` (default: the current state) with ``stage_options``
         (default: the current ones); ``accept``: a test of a converged result that must also
         pass; ``warm``: the stopped result whose last iterate ``start`` is (IPOPT warm start);
-        ``commit``: an accepted result becomes the current state.  Returns (problem, result,
-        the accepted solution or else the unaccepted last iterate or None)."""
+        ``commit``: an accepted result becomes the current state; ``near``: ``start`` is close
+        to this stage's optimum (:data:`NEAR_START_IPOPT`).  Returns (problem, result, the
+        accepted solution or else the unaccepted last iterate or None)."""
         nonlocal state
         t0 = time.perf_counter()
         sp = build_screw_problem(data, stage_options or opts, start or state, corr, dense, held, aligned)
-        res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=_solver_options(options, sp.use_dyn, sp.hess_lag),
-                               warm=warm)
+        ipopt = {**_solver_options(options, sp.use_dyn, sp.hess_lag), **(NEAR_START_IPOPT if near else {})}
+        res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, options=ipopt, warm=warm)
         accepted, iterate = False, None
         if np.isfinite(res.objective) and _physical(data, candidate := read_solution(sp, res)):
             # an unconverged iterate is kept only if it fits the observed points no worse (VIS_SLACK)
@@ -1282,7 +1290,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                 shift = CubicSpline(data.times, start.q - state.q[cols], axis=0)
                 start = dataclasses.replace(start, t=state.t, q=state.q + shift(state.t), v=state.v)
             sp_al, res_al, iterate = run("gravity_aligned", corr_al, sp.use_dyn, held, converged_only=True, start=start,
-                                         aligned=rows, accept=accept, stage_options=sp.options)
+                                         aligned=rows, accept=accept, stage_options=sp.options, near=True)
             if not res_al.success and iterate is not None:
                 # stopped at max_iter: continued once, warm, as the dense stages are (run_dense)
                 sp_al, res_al, _ = run("gravity_aligned_continued", corr_al, sp.use_dyn, held, converged_only=True,
