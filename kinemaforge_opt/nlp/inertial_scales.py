@@ -15,8 +15,9 @@ centre of mass off by a few millimetres) cannot be fitted.  Here the ratios are 
 Both enter the Pinocchio dynamic parameters (about the link origin, on the joint line) linearly:
 π' = [r_m m, r_m m c, s_c I_c + r_m m S(c)], S(c) = |c|² 1 − c cᵀ.  When the NLP moves a joint
 line, the link frame moves with it but the body stays where the points put it: c becomes c − δ
-(δ the frame's displacement) and s_c keeps the value computed where the body was measured.  π' is a physical rigid body while s_c ≥ 0 (a scaled inertia about the centre of
-mass plus a point mass): the NLP constrains s_c ≥ MIN_COM_SCALE (``com_inertia_floor``).
+(δ the frame's displacement) and s_c keeps the value computed where the body was measured.  π'
+is a physical rigid body while s_c ≥ 0 (a scaled inertia about the centre of mass plus a point
+mass): the NLP constrains s_c ≥ MIN_COM_SCALE (``com_inertia_floor``).
 
 A prismatic joint's child (or a link without an axis of its own) keeps one ratio: its inertia
 along a translation is its mass, and its rotational inertia stays proportional to it.

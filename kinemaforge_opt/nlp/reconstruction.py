@@ -272,7 +272,8 @@ class ScrewResult:
     ``vis`` the robust sum Σ ρ_δ(r)/δ² over the final correspondences, ``dyn`` the robust sum of
     normalised defects, ``energy`` the soft penalty (× energy_weight) or, for the hard constraint,
     Σ (relative residual)² over the windows.  iterations: IPOPT iterations over all stages.
-    success: every stage converged (or its continuation did).  stages: per stage (name, iterations, success, seconds).
+    success: every stage converged (or its continuation did).  stages: per stage (name,
+    iterations, success, seconds).
     fitted: the dynamic parameters the NLP fitted ("damping:<joint>", "coulomb:<joint>",
     "mass_ratio:<link>", "inertia_ratio:<link>").  identified: those of them the data determine
     (status "identified").  When a damping or Coulomb coefficient fitted away from 0 is not
