@@ -15,7 +15,8 @@ centre of mass off by a few millimetres) cannot be fitted.  Here the ratios are 
 Both enter the Pinocchio dynamic parameters (about the link origin, on the joint line) linearly:
 π' = [r_m m, r_m m c, s_c I_c + r_m m S(c)], S(c) = |c|² 1 − c cᵀ.  When the NLP moves a joint
 line, the link frame moves with it but the body stays where the points put it: c becomes c − δ
-(δ the frame's displacement) and s_c keeps the value computed where the body was measured.  π'
+(δ the frame's displacement, fixed for a solve) and s_c keeps the value computed where the body
+was measured.  π'
 is a physical rigid body while s_c ≥ 0 (a scaled inertia about the centre of mass plus a point
 mass): the NLP constrains s_c ≥ MIN_COM_SCALE (``com_inertia_floor``).
 
@@ -89,9 +90,9 @@ def scaled_parameters(inertial: Inertial, axis: np.ndarray | None, mass_ratio, i
     origin) of the scaled body, as a list of expressions in the ratios (numbers or casadi symbols).
     Without an axis (or ``inertia_ratio`` None) every parameter scales with ``mass_ratio``.
 
-    shift: (3,) displacement of the link frame since ``inertial`` was written [m, link axes]
-    (numbers or a casadi column), or None: the body stays where it is and its centre of mass sits
-    at c − shift in the moved frame.  The ratios' shares (s_c) stay those of ``inertial``."""
+    shift: (3,) displacement of the link frame since ``inertial`` was written [m, link axes], or
+    None: the body stays where it is and its centre of mass sits at c − shift in the moved frame.
+    The ratios' shares (s_c) stay those of ``inertial``."""
     m, c, Ic = inertial.mass, inertial.com, inertial.inertia
     s_c = mass_ratio if axis is None or inertia_ratio is None else com_scale(inertial, axis, mass_ratio, inertia_ratio)
     cs = [float(c[i]) - (0.0 if shift is None else shift[i]) for i in range(3)]

@@ -18,10 +18,8 @@ does for its fits) — build cost independent of the number of steps:
 - ``unit_axis`` constraints: 2λ I on the axis; ``gauge`` is linear.
 
 z is the vector of every parameter variable of the problem (axes, origins, pitches, inertia
-ratios, damping, Coulomb); θ and φ of the bridge are functions of it (linear but for the
-inertial parameters, quadratic in the origins: a body stays put while its frame moves), composed
-into each block's derivatives.  The exact Hessian is what this computes (checked against
-casadi's in the tests), not an approximation.
+ratios, damping, Coulomb); θ and φ of the bridge are linear functions of it.  The exact
+Hessian is what this computes (checked against casadi's in the tests), not an approximation.
 """
 
 from __future__ import annotations
@@ -39,7 +37,7 @@ class DenseTerms:
 
     problem: the :class:`~.problem.Problem` (its declaration order fixes the decision vector).
     n: joints.  G: grid points.  theta_phi: Function (parameter variables in declaration order,
-    one input each) -> (θ, φ).  point, interval, energy: the per-grid-point right-hand
+    one input each) -> (θ, φ), linear.  point, interval, energy: the per-grid-point right-hand
     side, per-interval Hermite–Simpson and energy Functions of the builder.
     wrench_grid: (P, F, S) at the grid points; wrench_mid: the same at interval midpoints.
     h: (G − 1,) step lengths [s].  vis: list of (Function (q, θ, H) -> cost, frame columns (T,),
