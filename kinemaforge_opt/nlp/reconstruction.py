@@ -351,20 +351,28 @@ def initial_state(data: ScrewData) -> ScrewState:
 def state_model(data: ScrewData, state: ScrewState) -> ArticulatedModel:
     """The model of ``state``: axes, origins, pitches, damping/Coulomb and inertia ratios applied,
     limits = the range of q at the observed steps."""
-    model = data.model
+    model = _with_origins(data.model, state.origins)
     cols = np.searchsorted(state.t, data.times)
     for k, j in enumerate(model.movable_joints):
-        T = j.T_parent_joint.copy()
-        if j.type in ("revolute", "continuous", "helical"):
-            T[:3, 3] = state.origins[k]
         qk = state.q[cols, k]
         lim = j.limits if j.limits is not None else JointLimits()
         limits = JointLimits(float(qk.min()), float(qk.max()), lim.effort, lim.velocity)
         dyn = dataclasses.replace(j.dynamics, damping=float(state.damping[k]), coulomb=float(state.coulomb[k]))
-        model = model.with_joint(j.name, T_parent_joint=T, axis=state.axes[k] / np.linalg.norm(state.axes[k]),
+        model = model.with_joint(j.name, axis=state.axes[k] / np.linalg.norm(state.axes[k]),
                                  pitch=float(state.pitches[k]) if j.type == "helical" else 0.0,
                                  limits=limits, dynamics=dyn)
     return with_ratios(bodies_kept(model, data.model), data.model, state.mass_ratio, state.inertia_ratio)
+
+
+def _with_origins(model: ArticulatedModel, origins: np.ndarray) -> ArticulatedModel:
+    """``model`` with its rotating joints' origins (n, 3) [m, parent frames] replaced (a prismatic
+    joint's origin is not fitted: it keeps its own)."""
+    for k, j in enumerate(model.movable_joints):
+        if j.type in ("revolute", "continuous", "helical"):
+            T = j.T_parent_joint.copy()
+            T[:3, 3] = origins[k]
+            model = model.with_joint(j.name, T_parent_joint=T)
+    return model
 
 
 def frames_at_zero(model: ArticulatedModel) -> dict[str, np.ndarray]:
@@ -394,13 +402,7 @@ def _frame_shifts(model: ArticulatedModel, origins: np.ndarray) -> dict[str, np.
     """Link name -> displacement (3,) [m, in the link's axes] of its frame at q = 0 when the
     movable joints' origins (n, 3) (parent frames; a prismatic joint keeps its own) replace
     ``model``'s."""
-    moved = model
-    for k, j in enumerate(model.movable_joints):
-        if j.type in ("revolute", "continuous", "helical"):
-            T = j.T_parent_joint.copy()
-            T[:3, 3] = origins[k]
-            moved = moved.with_joint(j.name, T_parent_joint=T)
-    T_ref, T_new = frames_at_zero(model), frames_at_zero(moved)
+    T_ref, T_new = frames_at_zero(model), frames_at_zero(_with_origins(model, origins))
     return {l: T_new[l][:3, :3].T @ (T_new[l][:3, 3] - T_ref[l][:3, 3]) for l in T_ref}
 
 
@@ -929,12 +931,9 @@ def _prior_precision(name: str, value: float, params: list[str], sigma: float) -
 
 def _force_scale(data: ScrewData, joint, v_s: float, a_s: float) -> float:
     """Typical generalised force on ``joint`` [N·m or N]: inertia along it × typical acceleration."""
-    import pinocchio as pin
+    from ..model.pinocchio import joint_space_inertia
 
-    from ..model.pinocchio import build_pin_model
-
-    pm = build_pin_model(data.model)
-    M = pin.crba(pm, pm.createData(), np.zeros(data.model.nq))
+    M = joint_space_inertia(data.model, np.zeros(data.model.nq))
     k = data.model.joint_index(joint.name)
     return float(max(M[k, k] * a_s, 1e-6))
 
@@ -1129,7 +1128,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         (default: the current ones); ``accept``: a test of a converged result that must also
         pass; ``warm``: the stopped result whose last iterate ``start`` is (IPOPT warm start);
         ``commit``: an accepted result becomes the current state; ``ipopt``: IPOPT options on top
-        of :func:`_solver_options`'.  Returns (problem, result, the accepted solution or else the
+        of :func:`_solver_options`.  Returns (problem, result, the accepted solution or else the
         unaccepted last iterate or None)."""
         nonlocal state
         t0 = time.perf_counter()
