@@ -52,6 +52,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from ..errors import DataError, KinemaforgeError, ModelError
+from ..parallel import workers
 from ..io.sequence import Wrenches
 from ..model import ArticulatedModel, Inertial, JointLimits
 from ..physics.effects import EFFECTS
@@ -834,8 +835,8 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
                 else:
                     phi_parts.append(ca.MX(values[k]))
         phi_mx = ca.vertcat(*phi_parts)
-        Rg, Wg = point.map(G)(X, P, F, S, theta_mx, phi_mx)
-        Dsum, Wk, Dn = interval.map(G - 1)(X[:, :-1], X[:, 1:], Rg[:, :-1], Rg[:, 1:], Wg[:, :-1], Wg[:, 1:],
+        Rg, Wg = point.map(G, "thread", workers())(X, P, F, S, theta_mx, phi_mx)
+        Dsum, Wk, Dn = interval.map(G - 1, "thread", workers())(X[:, :-1], X[:, 1:], Rg[:, :-1], Rg[:, 1:], Wg[:, :-1], Wg[:, 1:],
                                        Pm, Fm, Sm, np.diff(t_grid)[None, :], theta_mx, phi_mx)
         terms["dyn"] = ca.sum2(Dsum * ca.DM(dyn_mask[None, :]))
         if use_energy:

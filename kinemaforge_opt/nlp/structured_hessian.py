@@ -30,6 +30,8 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sps
 
+from ..parallel import workers
+
 
 @dataclass(frozen=True, eq=False)
 class DenseTerms:
@@ -190,7 +192,7 @@ def lagrangian_hessian(t: DenseTerms) -> ca.Function:
         if not t.gauss_newton:
             add_blocks(idx_e, He)
     lf_k = lfw if t.dyn_mask is None else lfw * ca.DM(np.asarray(t.dyn_mask, float)[None, :])
-    Hd, gW_all = f_int.map(K)(X[:, :-1], X[:, 1:], z, *wr, lf_k, mu_k)
+    Hd, gW_all = f_int.map(K, "thread", workers())(X[:, :-1], X[:, 1:], z, *wr, lf_k, mu_k)
     idx_d = np.array([np.concatenate([xcol(k), xcol(k + 1), zidx]) for k in range(K)])
     add_blocks(idx_d, Hd)
     if t.energy == "soft":
