@@ -35,7 +35,7 @@ from ..spatial import inverse, make_transform
 from .change import STATIC, TEST_SIGMAS
 from .colour import relabel_contact_by_colour
 from .perceive import Perception, perceive
-from .mass import MassProperties, moving_point_masks, part_mass_properties
+from .mass import MassProperties, budget_subsample, moving_point_masks, part_mass_properties
 from .segment import CLUSTER_VOXELS
 from .solids import fill_part_solids, part_motions
 from .surface import obj_text, part_surface
@@ -258,8 +258,9 @@ def closed_form_lines(per: Perception, graph: GraphResult) -> dict[str, JointLin
 def part_masses(per: Perception, reps: dict[str, int], labels: list[np.ndarray],
                 density: float) -> dict[str, MassProperties]:
     """Per moving part ``p`` (its representative track ``reps[p]``), the mass properties of its
-    labelled points that move with it (:func:`.mass.moving_point_masks`,
-    :func:`.mass.part_mass_properties`), in the track's frame: they depend on the tracks, the labels
+    labelled points (at most :data:`.mass.MASS_POINT_BUDGET`, :func:`.mass.budget_subsample`) that
+    move with it (:func:`.mass.moving_point_masks`, :func:`.mass.part_mass_properties`), in the
+    track's frame: they depend on the tracks, the labels
     and ``density`` [kg/m³], not on where the joints are, so the model rebuilt on the NLP's joints
     reuses them."""
     tracks = per.tracks
@@ -267,7 +268,7 @@ def part_masses(per: Perception, reps: dict[str, int], labels: list[np.ndarray],
     out = {}
     for p, k in reps.items():
         Ts = [tracks.Ts_world_track(k)[s] if tracks.observed()[k, s] else None for s in range(tracks.times.size)]
-        own = [c.points[lab == p] for c, lab in zip(per.clouds, labels)]
+        own = budget_subsample([c.points[lab == p] for c, lab in zip(per.clouds, labels)])
         masks = moving_point_masks(own, clouds_t, Ts, per.inlier_distance)
         seen = [s for s, T in enumerate(Ts) if T is not None]
         T_track_world = {s: inverse(Ts[s]) for s in seen}

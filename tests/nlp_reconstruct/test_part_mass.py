@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from kinemaforge_opt.errors import DataError
-from kinemaforge_opt.perception.mass import moving_point_masks, part_mass_properties
+from kinemaforge_opt.perception.mass import budget_subsample, moving_point_masks, part_mass_properties
 from kinemaforge_opt.spatial import exp_so3, make_transform
 
 W, H, T_SLAB, RHO = 0.45, 0.80, 0.018, 700.0  # door slab [m] and density [kg/m³]
@@ -82,6 +82,31 @@ def test_a_flat_cloud_gets_a_slab_one_voxel_thick():
     assert mp.mass == pytest.approx(500.0 * 0.3 * 0.5 * 0.02, rel=0.12)
     np.testing.assert_allclose(mp.com, [0.15, 0.0, 0.25], atol=1e-6)
     assert mp.inertia[1, 1] == pytest.approx(mp.mass / 12 * (0.3**2 + 0.5**2), rel=0.12)
+
+
+def test_a_budget_keeps_each_steps_share_and_the_mass_of_a_box():
+    """30 noisy observations of a 0.4 × 0.6 × 0.1 m box's surface (uniform on its faces): the
+    budget keeps the same share of every step, and the subsample's hull weighs what the box does."""
+    rng = np.random.default_rng(1)
+    ext = np.array([0.4, 0.6, 0.1])
+
+    def surface(n):
+        areas = np.array([ext[1] * ext[2], ext[0] * ext[2], ext[0] * ext[1]])
+        axis = rng.choice(3, n, p=areas / areas.sum())
+        p = rng.uniform(0, 1, (n, 3)) * ext
+        p[np.arange(n), axis] = rng.integers(0, 2, n) * ext[axis]
+        return p + rng.normal(0, 0.001, (n, 3))
+
+    steps = [surface(n) for n in rng.integers(8000, 12000, 30)]
+    total = sum(len(p) for p in steps)
+    kept = budget_subsample(steps, budget=30_000)
+    assert sum(len(p) for p in kept) == pytest.approx(30_000, abs=30)
+    np.testing.assert_allclose([len(k) / len(p) for k, p in zip(kept, steps)], 30_000 / total, atol=1e-3)
+    assert budget_subsample(steps, budget=total) is steps
+    mp = part_mass_properties(np.concatenate(kept), 500.0, "box", voxel=0.01)
+    # the 1 % trim per principal axis takes ~2 % of each extent
+    assert mp.mass == pytest.approx(500.0 * np.prod(ext), rel=0.06)
+    np.testing.assert_allclose(mp.com, ext / 2, atol=0.005)
 
 
 def test_errors_name_the_part_and_the_count():
