@@ -29,7 +29,8 @@ Named costs (each reported at the optimum; any can be switched off):
 
 The objective is the sum of the terms divided by the number of visual residuals.  Every
 per-step function is ``casadi.Function.map``-ped over the time steps, so the graph stays small and
-``jit`` is an option (it works, but compiling each stage costs more than it saves here).  The
+``jit`` is an option (it works, but compiling each stage costs more than it saves here); the
+dynamics maps evaluate on :func:`~kinemaforge_opt.parallel.workers` threads.  The
 dense stage's Lagrangian Hessian is assembled from per-block derivatives
 (:mod:`.structured_hessian`, the exact Hessian, build independent of the number of intervals):
 on protocol_cabinet_0 (2 doors, 77 grid points) the stage's build went from ~7 s CPU (casadi's

@@ -192,6 +192,7 @@ def lagrangian_hessian(t: DenseTerms) -> ca.Function:
         if not t.gauss_newton:
             add_blocks(idx_e, He)
     lf_k = lfw if t.dyn_mask is None else lfw * ca.DM(np.asarray(t.dyn_mask, float)[None, :])
+    # the interval blocks are most of the Hessian's cost (the ABA's second derivatives): on threads
     Hd, gW_all = f_int.map(K, "thread", workers())(X[:, :-1], X[:, 1:], z, *wr, lf_k, mu_k)
     idx_d = np.array([np.concatenate([xcol(k), xcol(k + 1), zidx]) for k in range(K)])
     add_blocks(idx_d, Hd)
