@@ -585,8 +585,13 @@ def stop_spans(times: np.ndarray, q: np.ndarray) -> list[tuple[int, int]]:
     """Frame spans (a, b) in which a stop may act: a joint, after leaving its start, arrives at
     frame a + 1 within STOP_BAND of its observed range of an end of that range, and the arrival is
     an impact (see :data:`STOP_DROP`); b is the first frame after its stay at that end (the stop
-    may push it off again; the last frame if it stays).  times (T,) [s], q (T, n) [rad or m] at
-    the observed frames; every joint and every arrival is examined."""
+    may push it off again; the last frame if it stays).  The stay holds the frames within the
+    band of the end or of where the joint is one frame after its arrival: a compliant stop is
+    pressed in at the impact, so the frame that catches the impact can lie past where the joint
+    then rests against the stop (protocol_laptop_0@s1's lid: 0.034 rad at the impact, then at
+    rest at 0.001 rad, outside the band; the stop's holding force, which the NLP does not model,
+    was then fitted as the lid's weight traded for Coulomb friction).  times (T,) [s], q (T, n)
+    [rad or m] at the observed frames; every joint and every arrival is examined."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     if q.shape[0] != times.size:
         q = q.T
@@ -608,8 +613,9 @@ def stop_spans(times: np.ndarray, q: np.ndarray) -> list[tuple[int, int]]:
             if end is None or not left[i]:
                 i += 1
                 continue
-            b = i  # the stay at that end
-            while b + 1 < T and abs(q[b + 1, k] - end) <= tol:
+            b = i  # the stay at that end, or where the joint settled against the stop
+            settled = q[min(i + 1, T - 1), k]
+            while b + 1 < T and min(abs(q[b + 1, k] - end), abs(q[b + 1, k] - settled)) <= tol:
                 b += 1
             if _impact(s[:, k], drop[:, k], i, leaves=b + 1 < T):
                 spans.append((i - 1, min(b + 1, T - 1)))

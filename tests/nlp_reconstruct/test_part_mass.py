@@ -128,3 +128,17 @@ def test_stop_spans_find_an_abrupt_stop_and_not_a_smooth_one():
     assert stop_spans(t, q_smooth) == []
     # a joint that starts at rest on its lower end and leaves it is not an impact
     assert stop_spans(t, np.column_stack([q_smooth[:, 0], np.zeros(t.size)])) == []
+
+
+def test_a_lid_that_falls_onto_a_compliant_stop_rests_there_to_the_end():
+    """A lid lifted to -1.35 rad and let go falls back onto its stop at 0; the frame that catches
+    the impact sees it pressed 0.035 rad into the stop (more than the band, 2 % of the range),
+    then it rests at 0.  The stop holds it from the impact to the last frame."""
+    from kinemaforge_opt.nlp.reconstruction import STOP_BAND, stop_spans
+
+    t = np.arange(20) * 0.158
+    lifted = [0.0, -0.11, -0.39, -0.74, -1.08, -1.33, -1.35, -1.0]
+    rest = np.random.default_rng(2).normal(0.0, 1e-3, 11)
+    q = np.array(lifted + [0.035] + list(rest))[:, None]
+    assert 0.035 - rest.max() > STOP_BAND * np.ptp(q)  # at rest, outside the band of the extreme
+    assert stop_spans(t, q) == [(7, 19)]
