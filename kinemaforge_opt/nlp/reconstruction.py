@@ -581,17 +581,30 @@ def _rates(t: np.ndarray, q: np.ndarray) -> tuple[CubicSpline, np.ndarray, np.nd
     return spline, v_s, a_s
 
 
-def stop_spans(times: np.ndarray, q: np.ndarray) -> list[tuple[int, int]]:
-    """Frame spans (a, b) in which a stop may act: a joint, after leaving its start, arrives at
-    frame a + 1 within STOP_BAND of its observed range of an end of that range, and the arrival is
-    an impact (see :data:`STOP_DROP`); b is the first frame after its stay at that end (the stop
-    may push it off again; the last frame if it stays).  The stay holds the frames within the
-    band of the end or of where the joint is one frame after its arrival: a compliant stop is
-    pressed in at the impact, so the frame that catches the impact can lie past where the joint
-    then rests against the stop (protocol_laptop_0@s1's lid: 0.034 rad at the impact, then at
-    rest at 0.001 rad, outside the band; the stop's holding force, which the NLP does not model,
-    was then fitted as the lid's weight traded for Coulomb friction).  times (T,) [s], q (T, n)
-    [rad or m] at the observed frames; every joint and every arrival is examined."""
+@dataclass(frozen=True)
+class StopImpact:
+    """A joint's impact on a stop (:func:`stop_impacts`): joint index k, the frame i that caught
+    the arrival at the end ``end`` [rad or m] of its observed range, the last frame b of its stay
+    there, and ``rest``: where it rests against the stop (the stay's extreme frame after i on the
+    stop's side; ``end`` when it stays no frame after i)."""
+
+    k: int
+    i: int
+    b: int
+    end: float
+    rest: float
+
+
+def stop_impacts(times: np.ndarray, q: np.ndarray) -> list[StopImpact]:
+    """The stop impacts of the joints moving as q (T, n) [rad or m] at the observed frames
+    ``times`` (T,) [s]: a joint, after leaving its start, arrives at frame i within STOP_BAND of
+    its observed range of an end of that range, and the arrival is an impact (see
+    :data:`STOP_DROP`).  Its stay at that end holds the frames within the band of the end or of
+    where the joint is one frame after its arrival: a compliant stop is pressed in at the impact,
+    so the frame that catches the impact can lie past where the joint then rests against the stop
+    (protocol_laptop_0@s1's lid: 0.034 rad at the impact, then at rest at 0.001 rad, outside the
+    band; the stop's holding force, which the NLP does not model, was then fitted as the lid's
+    weight traded for Coulomb friction).  Every joint and every arrival is examined."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     if q.shape[0] != times.size:
         q = q.T
@@ -600,7 +613,7 @@ def stop_spans(times: np.ndarray, q: np.ndarray) -> list[tuple[int, int]]:
         return []
     s = np.abs(np.diff(q, axis=0) / np.diff(times)[:, None])  # (T-1, n) speed over step j -> j + 1
     drop = np.maximum(s[:-1] - s[1:], 0.0)  # (T-2, n): drop[i-1], the speed lost at frame i
-    spans = []
+    out = []
     for k in range(q.shape[1]):
         lo, hi = q[:, k].min(), q[:, k].max()
         tol = STOP_BAND * (hi - lo)
@@ -618,9 +631,35 @@ def stop_spans(times: np.ndarray, q: np.ndarray) -> list[tuple[int, int]]:
             while b + 1 < T and min(abs(q[b + 1, k] - end), abs(q[b + 1, k] - settled)) <= tol:
                 b += 1
             if _impact(s[:, k], drop[:, k], i, leaves=b + 1 < T):
-                spans.append((i - 1, min(b + 1, T - 1)))
+                stay = q[i + 1:b + 1, k]
+                rest = end if not stay.size else float(stay.max() if end == hi else stay.min())
+                out.append(StopImpact(k, i, b, float(end), rest))
             i = b + 1
-    return sorted(spans)
+    return out
+
+
+def stop_spans(times: np.ndarray, q: np.ndarray) -> list[tuple[int, int]]:
+    """Frame spans (a, b) in which a stop may act: per :func:`stop_impacts`, a = the frame before
+    the one that caught the impact, b = the first frame after the stay at the stop (the stop may
+    push it off again; the last frame if it stays).  times (T,) [s], q (T, n) [rad or m]."""
+    return sorted((e.i - 1, min(e.b + 1, times.size - 1)) for e in stop_impacts(times, q))
+
+
+def stop_limits(times: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(n, 2) lower and upper limits [rad or m] of the joints moving as q (T, n) at the frames
+    ``times`` (T,) [s]: the observed range, but an end where a joint hit a stop and then rested
+    against it farther than STOP_BAND of its range from the impact frame is where it rests (the
+    impact frame caught the compliant stop pressed in; a simulator's stop at that depth would hold
+    the joint there: protocol_laptop_1@s1's lid, resting at 0.001 rad under a limit at 0.077 rad,
+    replayed 9 mm off after 50 s, 0.2 mm with the limit where it rests)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    if q.shape[0] != times.size:
+        q = q.T
+    limits = np.column_stack([q.min(axis=0), q.max(axis=0)])
+    for e in stop_impacts(times, q):
+        if abs(e.end - e.rest) > STOP_BAND * np.ptp(q[:, e.k]):
+            limits[e.k, int(e.end == limits[e.k, 1])] = e.rest
+    return limits
 
 
 def _impact(s: np.ndarray, drop: np.ndarray, i: int, leaves: bool) -> bool:

@@ -28,7 +28,7 @@ from ..io.atomic import atomic_path, write_text_atomic
 from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks
 from ..model import ArticulatedModel, Geometry, Inertial, Joint, JointLimits, Link, write_urdf
-from ..nlp.reconstruction import ScrewData, ScrewOptions, ScrewResult, refine_screws, with_ratios
+from ..nlp.reconstruction import ScrewData, ScrewOptions, ScrewResult, refine_screws, stop_limits, with_ratios
 from ..nlp.visual import surface_model
 from ..parallel import thread_map
 from ..spatial import inverse, make_transform
@@ -304,8 +304,9 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
         T_world_link0[j.child] = T_world_joint
         T_parent_joint = inverse(T_world_link0[j.parent]) @ T_world_joint
         axis_joint = T_world_joint[:3, :3].T @ axis
-        q = line.q[np.isfinite(line.q)]
-        limits = JointLimits(float(q.min()), float(q.max())) if jtype != "fixed" else None
+        seen = np.isfinite(line.q)
+        # the observed range; where the joint rests against a stop, there (stop_limits)
+        limits = JointLimits(*map(float, stop_limits(tracks.times[seen], line.q[seen])[0])) if jtype != "fixed" else None
         joints.append(Joint(j.name, jtype, j.parent, j.child, T_parent_joint, axis_joint,
                             line.pitch if jtype == "helical" else 0.0, limits))
         records.append({
