@@ -585,8 +585,8 @@ def _rates(t: np.ndarray, q: np.ndarray) -> tuple[CubicSpline, np.ndarray, np.nd
 class StopImpact:
     """A joint's impact on a stop (:func:`stop_impacts`): joint index k, the frame i that caught
     the arrival at the end ``end`` [rad or m] of its observed range, the last frame b of its stay
-    there, and ``rest``: where it rests against the stop (the stay's extreme frame after i on the
-    stop's side; ``end`` when it stays no frame after i)."""
+    there, and ``rest``: where it rests against the stop to the last frame when that lies off the
+    end's band (the extreme of those frames on the stop's side), else ``end``."""
 
     k: int
     i: int
@@ -599,12 +599,16 @@ def stop_impacts(times: np.ndarray, q: np.ndarray) -> list[StopImpact]:
     """The stop impacts of the joints moving as q (T, n) [rad or m] at the observed frames
     ``times`` (T,) [s]: a joint, after leaving its start, arrives at frame i within STOP_BAND of
     its observed range of an end of that range, and the arrival is an impact (see
-    :data:`STOP_DROP`).  Its stay at that end holds the frames within the band of the end or of
-    where the joint is one frame after its arrival: a compliant stop is pressed in at the impact,
-    so the frame that catches the impact can lie past where the joint then rests against the stop
-    (protocol_laptop_0@s1's lid: 0.034 rad at the impact, then at rest at 0.001 rad, outside the
-    band; the stop's holding force, which the NLP does not model, was then fitted as the lid's
-    weight traded for Coulomb friction).  Every joint and every arrival is examined."""
+    :data:`STOP_DROP`).  Its stay at that end holds the frames within the band of the end; a joint
+    that from the frame after the arrival on stays within the band of that frame to the last one,
+    off the end's band, rests against the stop to the end too (``rest``): a compliant stop is
+    pressed in at the impact, so the frame that catches it can lie past where the joint then rests
+    (protocol_laptop_0@s1's lid: 0.034 rad at the impact, then at rest at 0.001 rad; the stop's
+    holding force, which the NLP does not model, was fitted as the lid's weight traded for Coulomb
+    friction).  A door or drawer that rebounds and moves off keeps the end's band alone (with the
+    frame after the arrival taken as where it rests, protocol_refrigerator_0's rebounding door was
+    left out two frames longer and its full fit stopped at 200 iterations).  Every joint and every
+    arrival is examined."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     if q.shape[0] != times.size:
         q = q.T
@@ -626,13 +630,16 @@ def stop_impacts(times: np.ndarray, q: np.ndarray) -> list[StopImpact]:
             if end is None or not left[i]:
                 i += 1
                 continue
-            b = i  # the stay at that end, or where the joint settled against the stop
-            settled = q[min(i + 1, T - 1), k]
-            while b + 1 < T and min(abs(q[b + 1, k] - end), abs(q[b + 1, k] - settled)) <= tol:
+            b = i  # the stay at that end
+            while b + 1 < T and abs(q[b + 1, k] - end) <= tol:
                 b += 1
+            rest = end
+            after = q[i + 1:, k]
+            if b + 1 < T and abs(after[0] - end) > tol and np.all(np.abs(after - after[0]) <= tol):
+                # at rest off the end's band from the frame after the impact to the last one: where
+                # the compliant stop holds it
+                b, rest = T - 1, float(after.max() if end == hi else after.min())
             if _impact(s[:, k], drop[:, k], i, leaves=b + 1 < T):
-                stay = q[i + 1:b + 1, k]
-                rest = end if not stay.size else float(stay.max() if end == hi else stay.min())
                 out.append(StopImpact(k, i, b, float(end), rest))
             i = b + 1
     return out
@@ -648,7 +655,7 @@ def stop_spans(times: np.ndarray, q: np.ndarray) -> list[tuple[int, int]]:
 def stop_limits(times: np.ndarray, q: np.ndarray) -> np.ndarray:
     """(n, 2) lower and upper limits [rad or m] of the joints moving as q (T, n) at the frames
     ``times`` (T,) [s]: the observed range, but an end where a joint hit a stop and then rested
-    against it farther than STOP_BAND of its range from the impact frame is where it rests (the
+    against it off the impact frame's band (:func:`stop_impacts`) is where it rests (the
     impact frame caught the compliant stop pressed in; a simulator's stop at that depth would hold
     the joint there: protocol_laptop_1@s1's lid, resting at 0.001 rad under a limit at 0.077 rad,
     replayed 9 mm off after 50 s, 0.2 mm with the limit where it rests)."""
@@ -657,8 +664,7 @@ def stop_limits(times: np.ndarray, q: np.ndarray) -> np.ndarray:
         q = q.T
     limits = np.column_stack([q.min(axis=0), q.max(axis=0)])
     for e in stop_impacts(times, q):
-        if abs(e.end - e.rest) > STOP_BAND * np.ptp(q[:, e.k]):
-            limits[e.k, int(e.end == limits[e.k, 1])] = e.rest
+        limits[e.k, int(e.end == limits[e.k, 1])] = e.rest
     return limits
 
 
