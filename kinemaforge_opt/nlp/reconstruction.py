@@ -53,9 +53,9 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from ..errors import DataError, KinemaforgeError, ModelError
-from ..parallel import workers
 from ..io.sequence import Wrenches
 from ..model import ArticulatedModel, Inertial, JointLimits
+from ..parallel import workers
 from ..physics.effects import EFFECTS
 from ..symbolic import build_dynamics
 from .inertial_scales import MIN_COM_SCALE, com_scale, has_axis_ratio, link_axis, scaled_inertial, scaled_parameters
@@ -888,8 +888,9 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
                     phi_parts.append(ca.MX(values[k]))
         phi_mx = ca.vertcat(*phi_parts)
         Rg, Wg = point.map(G, "thread", workers())(X, P, F, S, theta_mx, phi_mx)
-        Dsum, Wk, Dn = interval.map(G - 1, "thread", workers())(X[:, :-1], X[:, 1:], Rg[:, :-1], Rg[:, 1:], Wg[:, :-1], Wg[:, 1:],
-                                       Pm, Fm, Sm, np.diff(t_grid)[None, :], theta_mx, phi_mx)
+        Dsum, Wk, Dn = interval.map(G - 1, "thread", workers())(
+            X[:, :-1], X[:, 1:], Rg[:, :-1], Rg[:, 1:], Wg[:, :-1], Wg[:, 1:],
+            Pm, Fm, Sm, np.diff(t_grid)[None, :], theta_mx, phi_mx)
         terms["dyn"] = ca.sum2(Dsum * ca.DM(dyn_mask[None, :]))
         if use_energy:
             steps = max(1, int(round(options.energy_window_s / max(np.median(np.diff(t_grid)), 1e-9))))

@@ -232,8 +232,9 @@ def verify_reconstruction(
 def open_limits(model: ArticulatedModel) -> ArticulatedModel:
     """``model`` with every movable joint's position limits removed (effort and velocity kept).
 
-    A reconstruction's limits are the observed range of motion, not stops the object is known to
-    have: every joint reaches them by construction.  The mismatch discovery treats a declared stop
+    A reconstruction's limits are the observed range of motion (or where a joint rests against a
+    stop it hit, :func:`~kinemaforge_opt.nlp.reconstruction.stop_limits`), not stops the object is
+    known to have: every joint reaches them by construction.  The mismatch discovery treats a declared stop
     as nominal physics and stops reading the recording there, so it gets the joints unlimited
     instead; a real stop in the data then shows as a ``limit_contact`` effect."""
     from ..model import JointLimits
