@@ -269,7 +269,7 @@ class ScrewProblem:
 @dataclass(frozen=True, eq=False)
 class ScrewResult:
     """The refined estimate.  model: the model with refined axes, origins, pitches, limits (observed
-    range of q), and damping / Coulomb friction / scaled inertia where identified.  q: (T, n) at the
+    range of q, or where a joint rests against a stop: :func:`stop_limits`), and damping / Coulomb friction / scaled inertia where identified.  q: (T, n) at the
     observed steps.  terms: name -> value of each term at the end, None for a term switched off:
     ``vis`` the robust sum Σ ρ_δ(r)/δ² over the final correspondences, ``dyn`` the robust sum of
     normalised defects, ``energy`` the soft penalty (× energy_weight) or, for the hard constraint,
@@ -352,13 +352,13 @@ def initial_state(data: ScrewData) -> ScrewState:
 
 def state_model(data: ScrewData, state: ScrewState) -> ArticulatedModel:
     """The model of ``state``: axes, origins, pitches, damping/Coulomb and inertia ratios applied,
-    limits = the range of q at the observed steps."""
+    limits those of q at the observed steps (:func:`stop_limits`, as the written URDF's)."""
     model = _with_origins(data.model, state.origins)
     cols = np.searchsorted(state.t, data.times)
+    ranges = stop_limits(data.times, state.q[cols])
     for k, j in enumerate(model.movable_joints):
-        qk = state.q[cols, k]
         lim = j.limits if j.limits is not None else JointLimits()
-        limits = JointLimits(float(qk.min()), float(qk.max()), lim.effort, lim.velocity)
+        limits = JointLimits(float(ranges[k, 0]), float(ranges[k, 1]), lim.effort, lim.velocity)
         dyn = dataclasses.replace(j.dynamics, damping=float(state.damping[k]), coulomb=float(state.coulomb[k]))
         model = model.with_joint(j.name, axis=state.axes[k] / np.linalg.norm(state.axes[k]),
                                  pitch=float(state.pitches[k]) if j.type == "helical" else 0.0,
