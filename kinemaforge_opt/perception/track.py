@@ -639,9 +639,11 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
     points not yet explained by a tracked proposal (within the coarse ICP radius of its moved
     points: closer leftovers are the part's own fringe, seen through a small track error) are
     clustered into new proposals of at least ``tracker.min_points`` points, and each is tracked
-    through the sequence; then every track is refined (:func:`refine`)."""
+    through the sequence; a proposal seeded on two touching parts is dropped once better tracks
+    cover it (:func:`without_unions`); then every track is refined (:func:`refine`)."""
     order = seed_order(tracker)
     proposals: list[Proposal] = []
+    seeds: dict[str, tuple[int, np.ndarray]] = {}  # a proposal's reference step and seed points
     radius = ICP_COARSE_VOXELS * tracker.voxel
     for r in order:
         moving = tracker.clouds[r].points[tracker.status[r] == MOVING]
@@ -660,10 +662,42 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
             k, a = _comoving(new, proposals, ICP_COARSE_VOXELS * tracker.voxel)
             if k is None:
                 proposals.append(new)
+                seeds[new.name] = (int(r), rest[idx])
             else:  # a disconnected piece of a tracked part (a drawer's floor behind its front), or
                 # the part itself where its track was cut (a slip)
                 proposals[k] = join(proposals[k], new, a)
+    proposals = without_unions(tracker, proposals, seeds)
     return merge_fragments(tracker, refine(tracker, proposals)) if proposals else proposals
+
+
+def observed_steps(p: Proposal) -> int:
+    """Number of steps at which ``p``'s motion is known."""
+    return int(np.isfinite(p.Ts_delta[:, 0, 0]).sum())
+
+
+def without_unions(tracker: Tracker, proposals: list[Proposal], seeds: dict[str, tuple[int, np.ndarray]]) -> list[Proposal]:
+    """The proposals (in the order they were seeded) less each whose seed later ones cover.
+
+    Two parts that touch while both move (a drawer pulled out above a door still swinging back)
+    are one cluster of moving points at such a step, and a seed taken there follows neither: its
+    track is lost wherever their motions part, or it follows one part and drags the other's points
+    along.  Where its track fails or drags, the parts' own moving points are left unexplained and
+    seed proposals of their own, later.  When proposals seeded after it and tracked at no fewer
+    steps cover COMOVING_SHARE of its seed points (within the fine ICP radius of their moved
+    points at the seed's step), its parts are tracked already and it is dropped.  ``seeds``:
+    proposal name -> (reference step, (N, 3) seed points)."""
+    fine = ICP_FINE_VOXELS * tracker.voxel
+    out = list(proposals)
+    for k, p in enumerate(proposals):
+        ref, seed = seeds[p.name]
+        covered = np.zeros(len(seed), dtype=bool)
+        for q in proposals[k + 1:]:
+            moved = q.points_at(ref) if observed_steps(q) >= observed_steps(p) else None
+            if moved is not None:
+                covered |= cKDTree(moved).query(seed, distance_upper_bound=fine, workers=-1)[0] < np.inf
+        if covered.mean() >= COMOVING_SHARE:
+            out = [x for x in out if x is not p]
+    return out
 
 
 def _common_anchor(p: Proposal, q: Proposal) -> tuple[np.ndarray, int | None]:
