@@ -1,0 +1,29 @@
+"""A drawer pulled out right above a door that still swings back (protocol_cabinet_multi_0, at
+Table 1's size: 8 views × 20 steps at 640×480, D435 noise), perceived from the RGB-D sequence
+alone and scored on the generator's ground truth.
+
+At the steps where both move, their moving points are one cluster; a proposal seeded there
+followed neither part and took a third of the door's pixels for the drawer (door IoU 0.61, part
+IoU 0.69).  Both
+parts must come out as their own parts, with the right joint types."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+
+@pytest.mark.slow
+def test_a_drawer_above_a_swinging_door_is_two_parts(tmp_path):
+    from problems.catalogue import get_case
+    from problems.eval_perception import ground_truth, run, score
+    from kinemaforge_opt.synth import generate_case
+
+    case = dataclasses.replace(get_case("protocol_cabinet_multi_0"), views=8, frames=20, width=640, height=480)
+    generate_case(case, tmp_path)
+    per, graph, _, _ = run(tmp_path / "sequence")
+    s = score(per, graph, ground_truth(tmp_path))
+    assert s["topology_ok"] and s["type_accuracy"] == 1.0
+    assert s["iou_moving"]["door"] > 0.8  # 0.89 when written; 0.61 when one proposal held door and drawer
+    assert s["part_iou"] > 0.8  # 0.84 when written; 0.69 then
