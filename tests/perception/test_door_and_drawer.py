@@ -4,8 +4,7 @@ alone and scored on the generator's ground truth.
 
 At the steps where both move, their moving points are one cluster; a proposal seeded there
 followed neither part and took a third of the door's pixels for the drawer (door IoU 0.61, part
-IoU 0.69).  Both
-parts must come out as their own parts, with the right joint types."""
+IoU 0.69).  Both parts must come out as their own parts, with the right joint types."""
 
 from __future__ import annotations
 
