@@ -269,8 +269,8 @@ class ScrewProblem:
 @dataclass(frozen=True, eq=False)
 class ScrewResult:
     """The refined estimate.  model: the model with refined axes, origins, pitches, limits (observed
-    range of q, or where a joint rests against a stop: :func:`stop_limits`), and damping / Coulomb friction / scaled inertia where identified.  q: (T, n) at the
-    observed steps.  terms: name -> value of each term at the end, None for a term switched off:
+    range of q, or where a joint rests against a stop: :func:`stop_limits`), and damping / Coulomb
+    friction / scaled inertia where identified.  q: (T, n) at the observed steps.  terms: name -> value of each term at the end, None for a term switched off:
     ``vis`` the robust sum Σ ρ_δ(r)/δ² over the final correspondences, ``dyn`` the robust sum of
     normalised defects, ``energy`` the soft penalty (× energy_weight) or, for the hard constraint,
     Σ (relative residual)² over the windows.  iterations: IPOPT iterations over all stages.
@@ -595,6 +595,12 @@ class StopImpact:
     rest: float
 
 
+def _time_major(times: np.ndarray, q) -> np.ndarray:
+    """q as a (T, n) float array for the T frames ``times`` (a (n, T) array is transposed)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    return q.T if q.shape[0] != times.size else q
+
+
 def stop_impacts(times: np.ndarray, q: np.ndarray) -> list[StopImpact]:
     """The stop impacts of the joints moving as q (T, n) [rad or m] at the observed frames
     ``times`` (T,) [s]: a joint, after leaving its start, arrives at frame i within STOP_BAND of
@@ -609,9 +615,7 @@ def stop_impacts(times: np.ndarray, q: np.ndarray) -> list[StopImpact]:
     frame after the arrival taken as where it rests, protocol_refrigerator_0's rebounding door was
     left out two frames longer and its full fit stopped at 200 iterations).  Every joint and every
     arrival is examined."""
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    if q.shape[0] != times.size:
-        q = q.T
+    q = _time_major(times, q)
     T = times.size
     if T < 5:
         return []
@@ -659,9 +663,7 @@ def stop_limits(times: np.ndarray, q: np.ndarray) -> np.ndarray:
     impact frame caught the compliant stop pressed in; a simulator's stop at that depth would hold
     the joint there: protocol_laptop_1@s1's lid, resting at 0.001 rad under a limit at 0.077 rad,
     replayed 9 mm off after 50 s, 0.2 mm with the limit where it rests)."""
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    if q.shape[0] != times.size:
-        q = q.T
+    q = _time_major(times, q)
     limits = np.column_stack([q.min(axis=0), q.max(axis=0)])
     for e in stop_impacts(times, q):
         limits[e.k, int(e.end == limits[e.k, 1])] = e.rest

@@ -24,7 +24,7 @@ from .clouds import (NOISE_IMAGES, VOXEL_FOOTPRINTS, DepthNoise, FrameCloud, Tim
                      estimate_depth_noise, footprint, frame_cloud, fuse, pixel_stride, static_voxel)
 from .resegment import resegment
 from .segment import Plane, environment_planes
-from .track import ICP_FINE_VOXELS, Proposal, Tracker, merge_fragments, propose_and_track
+from .track import ICP_FINE_VOXELS, Proposal, Tracker, merge_fragments, observed_steps, propose_and_track
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,7 +80,7 @@ def _trackable(proposals: list[Proposal], steps: int, voxel: float) -> list[Prop
     the fine ICP radius (ICP_FINE_VOXELS · ``voxel`` [m]; a track that jumps between surfaces
     follows no part)."""
     need = min(MIN_SAMPLES, steps)
-    proposals = [p for p in proposals if np.isfinite(p.Ts_delta[:, 0, 0]).sum() >= need]
+    proposals = [p for p in proposals if observed_steps(p) >= need]
     return [p for p in proposals if _jitter(p) <= ICP_FINE_VOXELS * voxel]
 
 

@@ -737,7 +737,7 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
     steps where that proposal's track failed: :func:`support`) or (None, None, []) (module doc,
     fragments)."""
     x = tracking_subset(frag.points)
-    observed = np.isfinite(frag.Ts_delta[:, 0, 0]).sum()
+    observed = observed_steps(frag)
     best, best_support, best_anchor, failed = None, -np.inf, None, []
     for k, p in enumerate(proposals):
         if p is frag:

@@ -234,9 +234,9 @@ def open_limits(model: ArticulatedModel) -> ArticulatedModel:
 
     A reconstruction's limits are the observed range of motion (or where a joint rests against a
     stop it hit, :func:`~kinemaforge_opt.nlp.reconstruction.stop_limits`), not stops the object is
-    known to have: every joint reaches them by construction.  The mismatch discovery treats a declared stop
-    as nominal physics and stops reading the recording there, so it gets the joints unlimited
-    instead; a real stop in the data then shows as a ``limit_contact`` effect."""
+    known to have: every joint reaches them by construction.  The mismatch discovery treats a
+    declared stop as nominal physics and stops reading the recording there, so it gets the joints
+    unlimited instead; a real stop in the data then shows as a ``limit_contact`` effect."""
     from ..model import JointLimits
 
     for j in model.movable_joints:
