@@ -17,6 +17,14 @@ position residual.  Otherwise the extra geometry (an arc's
 sagitta, a helix's rise, a drawer's stroke) is not resolved by the data: a 6 m-radius "hinge"
 on a drawer's 2 mm wobble, or a helix on a door's out-of-plane jitter, or a prismatic joint on
 a static part's noise.
+
+Conversely, a simpler model that an identifiable richer one *explains away* is no candidate
+either: on a strongly autocorrelated track (one moving camera's, c ≈ 1/N) every χ² shrinks to
+nothing and the parameter count alone would let a rigid "joint" with 15× the hinge's rotation
+residual win.  The richer model must fit clearly better and nowhere clearly worse, and account
+for the orientations: fit them clearly better, or to the noise.  A track whose orientation
+wanders 20σ under every model (a fragment spanning two drawers) is no rigid body; a better fit
+of its centroid rules nothing out.
 """
 
 from __future__ import annotations
@@ -31,6 +39,8 @@ from .motion import MIN_SAMPLES, SIGMA_FLOOR
 
 # Which simpler models each richer model must clearly beat to be identifiable.
 SIMPLER = {"rigid": (), "prismatic": ("rigid",), "revolute": ("rigid", "prismatic"), "helical": ("revolute", "prismatic")}
+# ... and every model nested in it (the simpler models' simpler models).
+NESTED = {"rigid": (), "prismatic": ("rigid",), "revolute": ("rigid", "prismatic"), "helical": ("rigid", "prismatic", "revolute")}
 
 
 def effective_fraction(hyps: dict[str, JointHypothesis]) -> tuple[float, float]:
@@ -54,8 +64,8 @@ def effective_fraction(hyps: dict[str, JointHypothesis]) -> tuple[float, float]:
 
 def score_pair(hyps: dict[str, JointHypothesis]) -> dict[str, JointHypothesis]:
     """Rescore each type's BIC for correlated residuals and set ``confidence`` to the type's
-    posterior probability for this pair, exp(−BIC/2) normalised over the identifiable types
-    (unidentifiable ones get bic = inf, confidence = 0)."""
+    posterior probability for this pair, exp(−BIC/2) normalised over the identifiable types that
+    no identifiable richer type explains away (the others get bic = inf, confidence = 0)."""
     s, c = effective_fraction(hyps)
     bic = {
         k: c * h.chi2 + (h.n_params + s * h.n_latent) * np.log(h.n_samples) for k, h in hyps.items()
@@ -73,7 +83,15 @@ def score_pair(hyps: dict[str, JointHypothesis]) -> dict[str, JointHypothesis]:
     def inadequate(j, k):  # simpler model j clearly misfits where k fits (positions or rotations)
         return rms[j] > SIGNIFICANCE * rms[k] or (rot[k] > 0 and rot[j] > SIGNIFICANCE * rot[k])
 
-    bic = {k: v for k, v in bic.items() if all(inadequate(j, k) for j in SIMPLER[k])}
+    def explains_away(k, j):  # richer k accounts for the track where simpler j fails (module doc)
+        turns_better = rot[k] > 0 and rot[j] > SIGNIFICANCE * rot[k]
+        holds_orientation = first.rotation_sigma == 0 or rot[k] <= SIGNIFICANCE * np.sqrt(3.0) * first.rotation_sigma
+        fits_better = turns_better or (rms[j] > SIGNIFICANCE * rms[k] and holds_orientation)
+        return fits_better and not inadequate(k, j)
+
+    identifiable = [k for k in bic if all(inadequate(j, k) for j in SIMPLER[k])]
+    ruled_out = {j for k in identifiable for j in NESTED[k] if explains_away(k, j)}
+    bic = {k: bic[k] for k in identifiable if k not in ruled_out}
     log_w = log_posterior(bic)
     return {
         k: dataclasses.replace(h, bic=float(bic.get(k, np.inf)), confidence=float(np.exp(log_w.get(k, -np.inf))))

@@ -19,7 +19,7 @@ from ..graph.motion import MIN_SAMPLES, noise_sigma
 from ..io.sequence import Sequence
 from ..io.tracks import PoseTracks
 from ..parallel import thread_map
-from .change import MOVING, STATIC, motion_status, pixel_status
+from .change import MOVING, STATIC, TEST_SIGMAS, motion_status, pixel_status
 from .clouds import (NOISE_IMAGES, VOXEL_FOOTPRINTS, DepthNoise, FrameCloud, TimeCloud, downsample,
                      estimate_depth_noise, footprint, frame_cloud, fuse, pixel_stride, static_voxel)
 from .resegment import resegment
@@ -36,7 +36,8 @@ class Perception:
     proposals: tracked candidate parts.  tracks: their full-pose PoseTracks (one track per
     proposal, frame at the proposal centroid with world axes at its reference time).
     environment: background planes.  timing_s: wall seconds per stage; cpu_s: CPU seconds
-    (this process, all threads) per stage."""
+    (this process, all threads) per stage.  plane_band: distance [m] within which a point may lie
+    on an environment plane (:func:`environment_band`; None: the inlier distance)."""
 
     times: np.ndarray
     clouds: list[TimeCloud]
@@ -48,11 +49,38 @@ class Perception:
     environment: list[Plane]
     timing_s: dict[str, float] = field(default_factory=dict)
     cpu_s: dict[str, float] = field(default_factory=dict)
+    plane_band: float | None = None
 
     @property
     def inlier_distance(self) -> float:
         """Distance [m] within which a point lies on a surface: the ICP fine radius."""
         return ICP_FINE_VOXELS * self.voxel
+
+    @property
+    def environment_band(self) -> float:
+        """Distance [m] within which a point may lie on an environment plane."""
+        return self.inlier_distance if self.plane_band is None else self.plane_band
+
+
+PLANE_BAND_QUANTILE = 0.95
+"""A moving camera's plane band covers the depth noise of this share of a step's readings."""
+
+
+def environment_band(cloud: TimeCloud, noise: DepthNoise, inlier: float, averaged: bool) -> float:
+    """Distance [m] within which a point of ``cloud`` may lie on an environment plane.
+
+    Static cameras' static readings are temporal means (:func:`static_depth`), so a floor or wall
+    lies within the ``inlier`` distance (the fine ICP radius) at any range.  A moving camera reads
+    each point once: its σ_z at 2.5 m (1.9 cm for a D435-like sensor) exceeds that radius, and a
+    floor seen that way puts 2.5–3 % of the scene more than the radius behind itself, where the
+    one-side test of :func:`segment.environment_planes` allows 1 %.  Then the band is TEST_SIGMAS
+    σ_z at the range (distance to the nearest camera of the step) within which PLANE_BAND_QUANTILE
+    of the step's points lie, and never less than ``inlier``."""
+    if averaged or not len(cloud.points):
+        return inlier
+    centres = np.array([v.frame.T_world_camera[:3, 3] for v in cloud.views])
+    z = np.linalg.norm(cloud.points[:, None, :] - centres[None], axis=2).min(axis=1)
+    return max(inlier, float(TEST_SIGMAS * noise.sigma(np.quantile(z, PLANE_BAND_QUANTILE))))
 
 
 def _tracks(proposals: list[Proposal], times: np.ndarray) -> PoseTracks:
@@ -209,7 +237,8 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
     views = [[cloud_of[f.index] for f in seq.frames_at(t)] for t in times]
     del depths
     t0 = stage("clouds", t0)
-    if static_cameras(seq, times):
+    static = static_cameras(seq, times)
+    if static:
         views = _pixel_status_views(seq, times, views, noise)
         first = np.concatenate([v.points_world[v.status == STATIC] for v in views[0]])
         coarse = static_voxel(len(downsample(first, voxel)), voxel)
@@ -222,9 +251,10 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
     t0 = stage("motion", t0)
     radius = ICP_FINE_VOXELS * voxel
     mid = times.size // 2
-    env = environment_planes(clouds[mid].points[status[mid] == STATIC], clouds[mid].points, radius)
+    band = environment_band(clouds[mid], noise, radius, averaged=static)
+    env = environment_planes(clouds[mid].points[status[mid] == STATIC], clouds[mid].points, band)
     t0 = stage("environment", t0, tick=False)
-    tracker = Tracker(clouds, status, seq.cameras, noise, voxel, tuple(env))
+    tracker = Tracker(clouds, status, seq.cameras, noise, voxel, tuple(env), band)
     proposals = _trackable(propose_and_track(tracker), times.size, voxel)
     t0 = stage("proposals+tracks", t0)
     # points that another proposal's motion (or the base) explains better move there; a proposal
@@ -242,4 +272,4 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
     status = thread_map(lambda s: _with_parts_moving(clouds[s].points, status[s], proposals, s, radius),
                         range(len(clouds)))
     stage("resegment", t0, tick=False)  # with the status of points on the parts
-    return Perception(times, clouds, status, noise, voxel, proposals, _tracks(proposals, times), env, timing, cpu)
+    return Perception(times, clouds, status, noise, voxel, proposals, _tracks(proposals, times), env, timing, cpu, band)

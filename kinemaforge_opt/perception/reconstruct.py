@@ -73,7 +73,7 @@ def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
         # the band errs wide).
         centres = np.array([v.frame.T_world_camera[:3, 3] for v in c.views])
         z = np.linalg.norm(c.points[:, None, :] - centres[None], axis=2).min(axis=1)
-        band = np.minimum(per.inlier_distance, TEST_SIGMAS * per.noise.sigma(z))
+        band = np.minimum(per.environment_band, TEST_SIGMAS * per.noise.sigma(z))
         for plane in per.environment:
             labels[np.abs(plane.distance(c.points)) <= band] = ENVIRONMENT
         best = np.full(len(c.points), np.inf)

@@ -331,12 +331,13 @@ class Tracker:
     clouds: the T time steps.  status: per step, (M_t,) STATIC/UNKNOWN/MOVING of its points.
     cameras, noise: for the free-space verification.  voxel: the cloud's voxel edge [m].
     background: the environment planes (:func:`segment.environment_planes`); growing never
-    takes a point within the fine ICP radius of one."""
+    takes a point within ``plane_band`` [m] of one (None: the fine ICP radius)."""
 
     def __init__(self, clouds: list[TimeCloud], status: list[np.ndarray], cameras: dict[str, CameraInfo],
-                 noise: DepthNoise, voxel: float, background: tuple[Plane, ...] = ()):
+                 noise: DepthNoise, voxel: float, background: tuple[Plane, ...] = (), plane_band: float | None = None):
         self.clouds, self.status, self.cameras, self.noise, self.voxel = clouds, status, cameras, noise, voxel
         self.background = background
+        self.plane_band = ICP_FINE_VOXELS * voxel if plane_band is None else plane_band
         self.set_targets([c.points[s != STATIC] for c, s in zip(clouds, status)])
         self._windows: dict[int, list[np.ndarray]] = {}
         self._full_trees: dict[int, cKDTree] = {}
@@ -552,7 +553,7 @@ class Tracker:
         reach_r = CLUSTER_VOXELS * self.voxel
         tested = in_part.copy()
         for plane in self.background:  # a floor slides along itself under a part's motion: never a tie to break
-            tested |= np.abs(plane.distance(cloud)) <= fine
+            tested |= np.abs(plane.distance(cloud)) <= self.plane_band
         part = points
         for _ in range(GROW_ROUNDS):
             near = cKDTree(part).query(cloud, distance_upper_bound=reach_r, workers=-1)[0] < np.inf
