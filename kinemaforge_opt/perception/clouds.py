@@ -89,6 +89,13 @@ class TimeCloud:
     sightlines: np.ndarray
 
 
+def camera_range(cloud: TimeCloud) -> np.ndarray:
+    """(M,) distance [m] of each of ``cloud``'s points to the nearest camera of its step (≥ its
+    depth: a noise band sized by it errs wide)."""
+    centres = np.array([v.frame.T_world_camera[:3, 3] for v in cloud.views])
+    return np.linalg.norm(cloud.points[:, None, :] - centres[None], axis=2).min(axis=1)
+
+
 def decimated_camera(camera: CameraInfo, stride: int) -> CameraInfo:
     """Intrinsics of the image sampled at every ``stride``-th row and column (pixel (r, c) of the
     decimated image is pixel (stride·r, stride·c) of the original)."""

@@ -20,8 +20,8 @@ from ..io.sequence import Sequence
 from ..io.tracks import PoseTracks
 from ..parallel import thread_map
 from .change import MOVING, STATIC, TEST_SIGMAS, motion_status, pixel_status
-from .clouds import (NOISE_IMAGES, VOXEL_FOOTPRINTS, DepthNoise, FrameCloud, TimeCloud, downsample,
-                     estimate_depth_noise, footprint, frame_cloud, fuse, pixel_stride, static_voxel)
+from .clouds import (NOISE_IMAGES, VOXEL_FOOTPRINTS, DepthNoise, FrameCloud, TimeCloud, camera_range,
+                     downsample, estimate_depth_noise, footprint, frame_cloud, fuse, pixel_stride, static_voxel)
 from .resegment import resegment
 from .segment import Plane, environment_planes
 from .track import ICP_FINE_VOXELS, Proposal, Tracker, merge_fragments, observed_steps, propose_and_track
@@ -74,13 +74,11 @@ def environment_band(cloud: TimeCloud, noise: DepthNoise, inlier: float, average
     each point once: its σ_z at 2.5 m (1.9 cm for a D435-like sensor) exceeds that radius, and a
     floor seen that way puts 2.5–3 % of the scene more than the radius behind itself, where the
     one-side test of :func:`segment.environment_planes` allows 1 %.  Then the band is TEST_SIGMAS
-    σ_z at the range (distance to the nearest camera of the step) within which PLANE_BAND_QUANTILE
+    σ_z at the range (:func:`clouds.camera_range`) within which PLANE_BAND_QUANTILE
     of the step's points lie, and never less than ``inlier``."""
     if averaged or not len(cloud.points):
         return inlier
-    centres = np.array([v.frame.T_world_camera[:3, 3] for v in cloud.views])
-    z = np.linalg.norm(cloud.points[:, None, :] - centres[None], axis=2).min(axis=1)
-    return max(inlier, float(TEST_SIGMAS * noise.sigma(np.quantile(z, PLANE_BAND_QUANTILE))))
+    return max(inlier, float(TEST_SIGMAS * noise.sigma(np.quantile(camera_range(cloud), PLANE_BAND_QUANTILE))))
 
 
 def _tracks(proposals: list[Proposal], times: np.ndarray) -> PoseTracks:

@@ -33,6 +33,7 @@ from ..nlp.visual import surface_model
 from ..parallel import thread_map
 from ..spatial import inverse, make_transform
 from .change import STATIC, TEST_SIGMAS
+from .clouds import camera_range
 from .colour import relabel_contact_by_colour
 from .perceive import Perception, perceive
 from .mass import MassProperties, budget_subsample, moving_point_masks, part_mass_properties
@@ -69,11 +70,8 @@ def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
         c, st = per.clouds[s], per.status[s]
         labels = np.full(len(c.points), BASE, dtype=object)
         # the band follows the depth noise, not the voxel: 1.5 voxels is 3.5 cm at 160x120 and took
-        # in a laptop lying on the floor.  Range = distance to the nearest camera (≥ the depth, so
-        # the band errs wide).
-        centres = np.array([v.frame.T_world_camera[:3, 3] for v in c.views])
-        z = np.linalg.norm(c.points[:, None, :] - centres[None], axis=2).min(axis=1)
-        band = np.minimum(per.environment_band, TEST_SIGMAS * per.noise.sigma(z))
+        # in a laptop lying on the floor.
+        band = np.minimum(per.environment_band, TEST_SIGMAS * per.noise.sigma(camera_range(c)))
         for plane in per.environment:
             labels[np.abs(plane.distance(c.points)) <= band] = ENVIRONMENT
         best = np.full(len(c.points), np.inf)
