@@ -14,10 +14,11 @@ within SIGNIFICANCE·σ of the noise) are merged first
 data.  The tree is the maximum spanning arborescence on log ρ (networkx, Edmonds) rooted at the
 base: the root's in-edges are EXCLUDED, as networkx has no root argument — this is the
 contextual preference for the ground/static part as root.  A child whose parent the data cannot
-tell from one of that parent's ancestors then hangs from the ancestor (the shorter chain,
-Occam; Vuong's closeness test, see ``_shallowest``).  ``ArborescenceIterator`` yields the k best
-trees.  ``method="greedy"`` is the ablation without a graph: attach groups one at a time,
-least-moving first, each to the already placed group that explains it best.
+tell from one of that parent's ancestors, or that moves less relative to the ancestor, then
+hangs from the ancestor (the shorter chain, Occam; see ``_shallowest``).
+``ArborescenceIterator`` yields the k best trees.  ``method="greedy"`` is the ablation without
+a graph: attach groups one at a time, least-moving first, each to the already placed group that
+explains it best.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from threadpoolctl import threadpool_limits
 from ..errors import DataError
 from ..io.tracks import PoseTracks
 from .fit import JointHypothesis, fit_all
-from .motion import MIN_SAMPLES, WORLD, relative_motion
+from .motion import MIN_SAMPLES, SIGMA_FLOOR, WORLD, relative_motion
 from .score import SIGNIFICANCE, closeness_z, log_posterior, score_pair
 
 # A pair is merged into one rigid part when the rigid type is at least this probable (a 95 %
@@ -43,6 +44,11 @@ MERGE_PROBABILITY = 0.95
 # Two candidate parents explain a child equally well when Vuong's closeness test cannot tell
 # them apart at the same 95 % level (two-sided): |z| within this (see :func:`_shallowest`).
 CLOSENESS_Z = float(norm.ppf(0.5 + MERGE_PROBABILITY / 2.0))
+# log ρ of an impossible arc (ρ = 0).  Finite, and far below any real tree's Σ log ρ (the
+# smallest positive ρ gives −745 per arc): Edmonds' algorithm subtracts arc weights while it
+# contracts cycles, and −1e300 absorbs every other weight in those sums — on a moving-camera
+# cabinet networkx then returned a tree of Σ log ρ = −2.83 before one of −0.06.
+IMPOSSIBLE_LOG = -1e6
 
 
 @dataclass(frozen=True, eq=False)
@@ -199,7 +205,13 @@ def _best_type(hyps: dict[str, JointHypothesis]) -> JointHypothesis:
 
 
 def _log(x: float) -> float:
-    return float(np.log(x)) if x > 0 else -1e300
+    return float(np.log(x)) if x > 0 else IMPOSSIBLE_LOG
+
+
+def _travel(h: JointHypothesis) -> float:
+    """Total variation of the fitted joint value Σ|Δq| [m or rad]: how far the child moves
+    relative to the parent under this relation."""
+    return float(np.abs(np.diff(h.q)).sum())
 
 
 def _tree(root, parts, edges, arcs) -> KinematicTree:
@@ -247,13 +259,23 @@ def _tree(root, parts, edges, arcs) -> KinematicTree:
 
 def _shallowest(root, edges, arcs) -> list[tuple[str, str]]:
     """Occam's rule on the arborescence's arcs: a child hangs from the ancestor of its parent
-    nearest the root that explains its motion as well as the parent does: Vuong's closeness
-    test tells the two fits apart by no more than CLOSENESS_Z (either way).
+    nearest the root that explains its motion as well as the parent does, or that it moves with.
 
-    Two doors on one hinge line move about the same axis relative to the base and relative to
-    each other; the chain through the other door fits within the noise just as well, but is the
-    longer explanation (it needs that door's joint to be right too).  Re-hanging a child on an
-    ancestor of its parent cannot close a cycle; parents are settled top-down."""
+    - As well: Vuong's closeness test tells the two fits apart by no more than CLOSENESS_Z
+      (either way).  Two doors on one hinge line move about the same axis relative to the base
+      and relative to each other; the chain through the other door fits within the noise just as
+      well, but is the longer explanation (it needs that door's joint to be right too).
+    - Moves with: the ancestor's fit of the same joint type is not clearly worse (residual RMS
+      within SIGNIFICANCE times the parent's, floored at SIGMA_FLOOR's) and needs less joint
+      travel Σ|Δq|.  A child carried by its parent travels *less* relative to it than relative to
+      the ancestor (the parent's own motion is added); a child that stays put while the parent
+      moves travels *more* (it must counter-move).  Drawers on parallel rails opened in turn
+      fit each other as well as the body, or better where their tracks share an error (a camera
+      drift cancels between two drawers); only the travel tells them apart.
+
+    Re-hanging a child on an ancestor of its parent cannot close a cycle; parents are settled
+    top-down.  The joint becomes the ancestor's best type (rigid when the child barely moves
+    relative to it: a fragment spanning two drawers then rejoins the body)."""
     parent = {b: a for a, b in arcs}
     children: dict[str, list[str]] = {}
     for a, b in arcs:
@@ -271,24 +293,36 @@ def _shallowest(root, edges, arcs) -> list[tuple[str, str]]:
                 if (anc, c) not in edges:
                     continue
                 alt = _best_type(edges[(anc, c)])
-                if alt.confidence > 0 and abs(closeness_z(held, alt)) <= CLOSENESS_Z:
+                same = edges[(anc, c)][held.type]
+                as_well = abs(closeness_z(held, alt)) <= CLOSENESS_Z
+                floor = max(held.residual_rms, np.sqrt(3.0) * SIGMA_FLOOR)
+                moves_with = (held.type != "rigid" and _travel(same) < _travel(held)
+                              and same.residual_rms <= SIGNIFICANCE * floor)
+                if alt.confidence > 0 and (as_well or moves_with):
                     parent[c] = anc
                     break
     return [(parent[b], b) for _, b in arcs]
 
 
-def _graph_trees(parts, edges, k_best: int) -> list[KinematicTree]:
-    """The trees of the k best arborescences (decreasing Σ log ρ), each re-hung by
-    :func:`_shallowest`; an arborescence that re-hangs onto an earlier tree is dropped (so fewer
-    than k trees may remain: enumerating further could take every tie combination in turn)."""
+def _arborescences(parts, edges, k_best: int) -> list[list[tuple[str, str]]]:
+    """The arcs of the k maximum spanning arborescences rooted at the base, by decreasing
+    Σ log ρ of their best types (networkx's Edmonds iterator; ρ = 0 weighs IMPOSSIBLE_LOG)."""
     G = nx.DiGraph()
     G.add_nodes_from(parts)
     for (a, b), hyps in edges.items():
         G.add_edge(a, b, weight=_log(_best_type(hyps).confidence))
     excluded = [(a, "base") for a in G.predecessors("base")]
+    return [list(A.edges) for A in islice(ArborescenceIterator(G, weight="weight", minimum=False,
+                                                               init_partition=([], excluded)), k_best)]
+
+
+def _graph_trees(parts, edges, k_best: int) -> list[KinematicTree]:
+    """The trees of the k best arborescences, each re-hung by :func:`_shallowest`; an
+    arborescence that re-hangs onto an earlier tree is dropped (so fewer than k trees may remain:
+    enumerating further could take every tie combination in turn)."""
     trees, seen = [], set()
-    for A in islice(ArborescenceIterator(G, weight="weight", minimum=False, init_partition=([], excluded)), k_best):
-        arcs = _shallowest("base", edges, list(A.edges))
+    for arcs in _arborescences(parts, edges, k_best):
+        arcs = _shallowest("base", edges, arcs)
         if frozenset(arcs) not in seen:
             seen.add(frozenset(arcs))
             trees.append(_tree("base", parts, edges, arcs))

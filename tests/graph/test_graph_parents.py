@@ -2,9 +2,11 @@
 known by construction: two doors on one hinge line (the base is the parent of both), two parents
 whose fits are drawn from one distribution (the shorter chain) or are not (the better one), a
 door on a door's edge (a real chain), a drawer fragment whose centroid bows while its
-orientation flips by π (prismatic)."""
+orientation flips by π (prismatic), drawers on parallel rails opened in turn (the body is the
+parent of each), and the arborescences checked against every tree of a small graph."""
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
@@ -13,7 +15,7 @@ from scipy.spatial.transform import Rotation
 from kinemaforge_opt.graph import infer_tree
 from kinemaforge_opt.graph.fit import JointHypothesis
 from kinemaforge_opt.graph.score import closeness_z
-from kinemaforge_opt.graph.tree import _graph_trees
+from kinemaforge_opt.graph.tree import _arborescences, _graph_trees
 from kinemaforge_opt.io.tracks import PoseTracks
 from kinemaforge_opt.spatial import axis_angle_error, make_transform, screw_motion, translation_motion
 
@@ -163,3 +165,74 @@ def test_bowed_drawer_fragment_with_flips_is_prismatic(seed):
     (j,) = infer_tree(_tracks({"fragment": (P, R)})).best.joints
     assert j.type == "prismatic"
     assert np.degrees(axis_angle_error(j.hypothesis.axis_world, RAIL)) < 3.0
+
+
+def _drawers_in_turn(rng, noise=True):
+    """A chest of three drawers on parallel rails, pulled out 25 cm one after the other and left
+    open.  Relative to an open drawer another drawer also slides along the rail: every drawer
+    and the body explain every drawer, and without noise all of them exactly."""
+    third = T // 3
+    body = [make_transform(p=(0.4, 0.2, 0.5))] * T
+    tracks = {"body": body}
+    for i in range(3):
+        stroke = 0.25 * np.clip((np.arange(T) - i * third) / (third - 1), 0.0, 1.0)
+        front = make_transform(p=(0.4, 0.0, 0.2 + 0.25 * i))
+        tracks[f"drawer_{i}"] = [translation_motion(RAIL, d) @ front for d in stroke]
+    split = lambda poses: (np.array([X[:3, 3] for X in poses]), np.array([X[:3, :3] for X in poses]))  # noqa: E731
+    return _tracks({k: _noisy(v, rng) if noise else split(v) for k, v in tracks.items()})
+
+
+@pytest.mark.parametrize("seed", [None, 0, 1, 2])
+def test_drawers_opened_in_turn_all_hang_from_the_body(seed):
+    """Relative to the body each drawer travels its own 25 cm; relative to another drawer it
+    travels that drawer's stroke too (it must counter-move while the other one slides).  The
+    drawer it is chained to does not carry it: the body is the parent of all three (seed None:
+    exact tracks, where every parent fits without residual)."""
+    res = infer_tree(_drawers_in_turn(np.random.default_rng(seed), noise=seed is not None))
+    assert _arcs(res) == {("base", f"drawer_{i}", "prismatic") for i in range(3)}
+    assert res.best.parts["base"] == ("world", "body")
+
+
+def _brute_force_best(parts, rho) -> float:
+    """The largest Σ log ρ over every assignment of one parent per non-root part that forms a
+    tree rooted at the base, using arcs with ρ > 0 only."""
+    others = [p for p in parts if p != "base"]
+    best = -np.inf
+    for parents in itertools.product(parts, repeat=len(others)):
+        up = dict(zip(others, parents))
+        if any(rho.get((a, b), 0.0) <= 0.0 for b, a in up.items()):
+            continue
+
+        def reaches_base(p, seen=()):
+            return p == "base" or (p not in seen and reaches_base(up[p], seen + (p,)))
+
+        if all(reaches_base(p) for p in others):
+            best = max(best, sum(np.log(rho[(a, b)]) for b, a in up.items()))
+    return best
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_best_arborescence_is_the_best_tree(seed):
+    """Random constraint graphs on five parts, a third of their arcs impossible (ρ = 0): the
+    first arborescence scores what the best of all trees scores (enumerated one by one)."""
+    rng = np.random.default_rng(seed)
+    parts = {p: (p,) for p in ("base", "a", "b", "c", "d")}
+    rho = {(a, b): float(rng.uniform(0.01, 1.0) if rng.uniform() > 1 / 3 else 0.0)
+           for a in parts for b in parts if a != b and b != "base"}
+    for b in parts:  # every part can hang from the base: a tree exists
+        if b != "base":
+            rho[("base", b)] = max(rho[("base", b)], 1e-3)
+    hyp = _hyp(np.zeros((T, 3)))
+    edges = {ab: {"revolute": dataclasses.replace(hyp, confidence=r)} for ab, r in rho.items()}
+    (arcs,) = _arborescences(parts, edges, 1)
+    assert sum(np.log(rho[ab]) for ab in arcs) == pytest.approx(_brute_force_best(parts, rho), abs=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_drawers_opened_in_turn_under_camera_drift_hang_from_the_body(seed):
+    """Every track drifts by one smooth 6 mm camera shift: relative to another drawer the drift
+    cancels, and that drawer fits better than the world.  Only the travel tells the body apart."""
+    tracks = _drawers_in_turn(np.random.default_rng(30 + seed))
+    drift = 6e-3 * np.sin(np.pi * np.arange(T) / T)[:, None] * np.array([1.0, 0.0, 0.5])
+    res = infer_tree(PoseTracks(tracks.times, tracks.names, tracks.positions + drift[None], tracks.Rs_world_track))
+    assert _arcs(res) == {("base", f"drawer_{i}", "prismatic") for i in range(3)}
