@@ -14,8 +14,8 @@ within SIGNIFICANCE·σ of the noise) are merged first
 data.  The tree is the maximum spanning arborescence on log ρ (networkx, Edmonds) rooted at the
 base: the root's in-edges are EXCLUDED, as networkx has no root argument — this is the
 contextual preference for the ground/static part as root.  A child whose parent the data cannot
-tell from one of that parent's ancestors, or that moves less relative to the ancestor, then
-hangs from the ancestor (the shorter chain, Occam; see ``_shallowest``).
+tell from one of that parent's ancestors, or that moves with the ancestor, then hangs from
+the ancestor (the shorter chain, Occam; see ``_shallowest``).
 ``ArborescenceIterator`` yields the k best trees.  ``method="greedy"`` is the ablation without
 a graph: attach groups one at a time, least-moving first, each to the already placed group that
 explains it best.
@@ -257,21 +257,40 @@ def _tree(root, parts, edges, arcs) -> KinematicTree:
     return KinematicTree(root, parts, joints, rigid_score + sum(_log(j.hypothesis.confidence) for j in joints))
 
 
+def _carrier(edges, anc: str, parent: str, child: str) -> str | None:
+    """Which of ``parent`` and its ancestor ``anc`` the child moves with, by joint travel: "anc",
+    "parent", or None when the travel cannot tell.
+
+    A child carried by its parent travels *less* relative to it than relative to the ancestor
+    (the parent's own travel is added); a child that stays put while its parent moves travels
+    *more* relative to the parent (it must counter-move).  The difference of the two travels is
+    therefore about ± the parent's own travel relative to the ancestor; it decides when it
+    exceeds half of that.  Comparable only in one joint type (the units of q), for a fit from the
+    ancestor that is not clearly worse (residual RMS within SIGNIFICANCE times the parent's,
+    floored at SIGMA_FLOOR's)."""
+    held = _best_type(edges[(parent, child)])
+    if held.type == "rigid" or (anc, parent) not in edges or _best_type(edges[(anc, parent)]).type != held.type:
+        return None
+    same, own = edges[(anc, child)][held.type], edges[(anc, parent)][held.type]
+    if same.residual_rms > SIGNIFICANCE * max(held.residual_rms, np.sqrt(3.0) * SIGMA_FLOOR):
+        return None
+    difference, margin = _travel(same) - _travel(held), 0.5 * _travel(own)
+    return "anc" if difference < -margin else "parent" if difference > margin else None
+
+
 def _shallowest(root, edges, arcs) -> list[tuple[str, str]]:
     """Occam's rule on the arborescence's arcs: a child hangs from the ancestor of its parent
-    nearest the root that explains its motion as well as the parent does, or that it moves with.
+    nearest the root that it moves with, or, when the joint travel cannot tell
+    (:func:`_carrier`), that explains its motion as well as the parent does: Vuong's closeness
+    test tells the two fits apart by no more than CLOSENESS_Z (either way).
 
-    - As well: Vuong's closeness test tells the two fits apart by no more than CLOSENESS_Z
-      (either way).  Two doors on one hinge line move about the same axis relative to the base
-      and relative to each other; the chain through the other door fits within the noise just as
-      well, but is the longer explanation (it needs that door's joint to be right too).
-    - Moves with: the ancestor's fit of the same joint type is not clearly worse (residual RMS
-      within SIGNIFICANCE times the parent's, floored at SIGMA_FLOOR's) and needs less joint
-      travel Σ|Δq|.  A child carried by its parent travels *less* relative to it than relative to
-      the ancestor (the parent's own motion is added); a child that stays put while the parent
-      moves travels *more* (it must counter-move).  Drawers on parallel rails opened in turn
-      fit each other as well as the body, or better where their tracks share an error (a camera
-      drift cancels between two drawers); only the travel tells them apart.
+    Two doors on one hinge line move about the same axis relative to the base and relative to
+    each other; the chain through the other door fits within the noise just as well, but is the
+    longer explanation (it needs that door's joint to be right too).  Drawers on parallel rails
+    opened in turn fit each other as well as the body, or better where their tracks share an
+    error (a camera drift cancels between two drawers): the travel says the body.  A tray
+    sliding out of an opened drawer along the same rail fits the body as well as the drawer:
+    the travel says the drawer, which carries it.
 
     Re-hanging a child on an ancestor of its parent cannot close a cycle; parents are settled
     top-down.  The joint becomes the ancestor's best type (rigid when the child barely moves
@@ -293,12 +312,9 @@ def _shallowest(root, edges, arcs) -> list[tuple[str, str]]:
                 if (anc, c) not in edges:
                     continue
                 alt = _best_type(edges[(anc, c)])
-                same = edges[(anc, c)][held.type]
+                carrier = _carrier(edges, anc, parent[c], c)
                 as_well = abs(closeness_z(held, alt)) <= CLOSENESS_Z
-                floor = max(held.residual_rms, np.sqrt(3.0) * SIGMA_FLOOR)
-                moves_with = (held.type != "rigid" and _travel(same) < _travel(held)
-                              and same.residual_rms <= SIGNIFICANCE * floor)
-                if alt.confidence > 0 and (as_well or moves_with):
+                if alt.confidence > 0 and (carrier == "anc" or carrier is None and as_well):
                     parent[c] = anc
                     break
     return [(parent[b], b) for _, b in arcs]

@@ -236,3 +236,21 @@ def test_drawers_opened_in_turn_under_camera_drift_hang_from_the_body(seed):
     drift = 6e-3 * np.sin(np.pi * np.arange(T) / T)[:, None] * np.array([1.0, 0.0, 0.5])
     res = infer_tree(PoseTracks(tracks.times, tracks.names, tracks.positions + drift[None], tracks.Rs_world_track))
     assert _arcs(res) == {("base", f"drawer_{i}", "prismatic") for i in range(3)}
+
+
+def test_tray_sliding_out_of_an_opened_drawer_keeps_the_drawer_as_parent():
+    """A drawer pulled out 30 cm, then a tray inside it pulled out 20 cm further along the same
+    rail, exact tracks.  Relative to the body the tray slides along that rail too and fits
+    without residual, as relative to the drawer; but it travels 50 cm there against 20 cm
+    relative to the drawer, which carries it.  (With noise the tray's fit relative to the drawer
+    carries both tracks' noise, and the parent posterior takes the body before any chain is
+    proposed: the travel rule only settles chains the arborescence proposes.)"""
+    half = T // 2
+    outer = 0.3 * np.clip(np.arange(T) / (half - 1), 0.0, 1.0)
+    inner = 0.2 * np.clip((np.arange(T) - half) / (T - half - 1), 0.0, 1.0)
+    drawer = [translation_motion(RAIL, d) @ make_transform(p=(0.4, 0.0, 0.3)) for d in outer]
+    tray = [X @ translation_motion(RAIL, d) @ make_transform(p=(0.0, 0.0, 0.05)) for X, d in zip(drawer, inner)]
+    body = [make_transform(p=(0.4, 0.2, 0.5))] * T
+    split = lambda poses: (np.array([X[:3, 3] for X in poses]), np.array([X[:3, :3] for X in poses]))  # noqa: E731
+    tracks = _tracks({"body": split(body), "drawer": split(drawer), "tray": split(tray)})
+    assert _arcs(infer_tree(tracks)) == {("base", "drawer", "prismatic"), ("drawer", "tray", "prismatic")}
