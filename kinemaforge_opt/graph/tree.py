@@ -266,23 +266,39 @@ def _carrier(edges, anc: str, parent: str, child: str) -> str | None:
     *more* relative to the parent (it must counter-move).  The difference of the two travels is
     therefore about ± the parent's own travel relative to the ancestor; it decides when it
     exceeds half of that.  Comparable only in one joint type (the units of q), for a fit from the
-    ancestor that is not clearly worse (residual RMS within SIGNIFICANCE times the parent's,
-    floored at SIGMA_FLOOR's)."""
+    ancestor that is not clearly worse: residual RMS within SIGNIFICANCE times the parent's
+    (floored at SIGMA_FLOOR's) and orientations not clearly worse (:func:`_turns_worse`; a hinge
+    fitted from the base to a folding door's second leaf leaves its turn unexplained, and its q
+    says nothing)."""
     held = _best_type(edges[(parent, child)])
     if held.type == "rigid" or (anc, parent) not in edges or _best_type(edges[(anc, parent)]).type != held.type:
         return None
     same, own = edges[(anc, child)][held.type], edges[(anc, parent)][held.type]
-    if same.residual_rms > SIGNIFICANCE * max(held.residual_rms, np.sqrt(3.0) * SIGMA_FLOOR):
+    misfits = same.residual_rms > SIGNIFICANCE * max(held.residual_rms, np.sqrt(3.0) * SIGMA_FLOOR)
+    if misfits or _turns_worse(same, held):
         return None
     difference, margin = _travel(same) - _travel(held), 0.5 * _travel(own)
     return "anc" if difference < -margin else "parent" if difference > margin else None
+
+
+def _turns_worse(alt: JointHypothesis, held: JointHypothesis) -> bool:
+    """True when ``alt`` misfits the child's orientations clearly (SIGNIFICANCE times) worse than
+    ``held`` does, both floored at the white-noise level (full-pose tracks; never for
+    position-only ones).  The closeness test compares positions only: a folding door's second
+    leaf, seen from the base, fits a straight slide to its positions about as well as the hinge
+    on the first leaf, while the slide leaves its 0.3-rad turn unexplained."""
+    if held.rotation_sigma <= 0:
+        return False
+    floor = np.sqrt(3.0) * max(held.rotation_sigma, SIGMA_FLOOR)
+    return alt.rotation_rms > SIGNIFICANCE * max(held.rotation_rms, floor)
 
 
 def _shallowest(root, edges, arcs) -> list[tuple[str, str]]:
     """Occam's rule on the arborescence's arcs: a child hangs from the ancestor of its parent
     nearest the root that it moves with, or, when the joint travel cannot tell
     (:func:`_carrier`), that explains its motion as well as the parent does: Vuong's closeness
-    test tells the two fits apart by no more than CLOSENESS_Z (either way).
+    test tells the two fits' positions apart by no more than CLOSENESS_Z (either way), and the
+    ancestor's fit does not turn clearly worse (:func:`_turns_worse`).
 
     Two doors on one hinge line move about the same axis relative to the base and relative to
     each other; the chain through the other door fits within the noise just as well, but is the
@@ -313,7 +329,7 @@ def _shallowest(root, edges, arcs) -> list[tuple[str, str]]:
                     continue
                 alt = _best_type(edges[(anc, c)])
                 carrier = _carrier(edges, anc, parent[c], c)
-                as_well = abs(closeness_z(held, alt)) <= CLOSENESS_Z
+                as_well = abs(closeness_z(held, alt)) <= CLOSENESS_Z and not _turns_worse(alt, held)
                 if alt.confidence > 0 and (carrier == "anc" or carrier is None and as_well):
                     parent[c] = anc
                     break
