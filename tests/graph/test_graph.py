@@ -179,4 +179,3 @@ def test_rigid_tree_edges_join_the_parent_part():
     assert tree.parts == {"base": ("world", "sticker"), "door": ("door", "knob")}
     assert [(j.parent, j.child, j.type) for j in tree.joints] == [("base", "door", "revolute")]
     assert tree.log_score == pytest.approx(np.log(0.9) + np.log(0.7) + np.log(0.6))
-
