@@ -13,6 +13,7 @@ import os
 import pickle
 import signal
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
@@ -39,14 +40,57 @@ def cpu_seconds() -> float:
     return t.user + t.system + t.children_user + t.children_system
 
 
+class _ThreadPool:
+    """One pool of worker threads for the process, made on first use and kept: perception calls
+    :func:`thread_map` hundreds of times per sequence on small batches (a region's growth
+    tests ten steps per round), and a pool made per call started and joined ~1500 threads on
+    eval_drawer_2.  A child forked by :func:`process_map` gets a new pool (the parent's threads
+    do not exist there)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._pool: ThreadPoolExecutor | None = None
+        self._size = 0
+        self._local = threading.local()  # .worker: True on the pool's own threads
+
+    def _mark_worker(self) -> None:
+        self._local.worker = True
+
+    def in_worker(self) -> bool:
+        """True on one of the pool's threads."""
+        return getattr(self._local, "worker", False)
+
+    def get(self, n: int) -> ThreadPoolExecutor:
+        """The pool, with at least ``n`` threads."""
+        with self._lock:
+            if self._pool is None or self._size < n:
+                if self._pool is not None:
+                    self._pool.shutdown(wait=False)
+                self._pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix="kinemaforge",
+                                                initializer=self._mark_worker)
+                self._size = n
+            return self._pool
+
+    def forget(self) -> None:
+        """Drop the pool without joining it (in a forked child, whose copy has no threads)."""
+        self._lock = threading.Lock()
+        self._pool, self._size = None, 0
+
+
+_THREADS = _ThreadPool()
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_THREADS.forget)
+
+
 def thread_map(fn: Callable[[X], Y], items: Sequence[X]) -> list[Y]:
     """``[fn(x) for x in items]``, in order, computed on up to :func:`workers` threads (in this
-    thread when that is one or there is one item).  An exception in ``fn`` propagates."""
+    thread when that is one or there is one item).  An exception in ``fn`` propagates.  Called
+    from within a ``thread_map`` item, it runs in that thread: the pool's threads are all
+    taken by the outer map already, and waiting on the pool from inside it could deadlock."""
     n = min(workers(), len(items))
-    if n <= 1:
+    if n <= 1 or _THREADS.in_worker():
         return [fn(x) for x in items]
-    with ThreadPoolExecutor(max_workers=n) as pool:
-        return list(pool.map(fn, items))
+    return list(_THREADS.get(n).map(fn, items))
 
 
 def process_map(fn: Callable[[X], Y], items: Sequence[X], n: int | None = None) -> list[Y]:

@@ -4,6 +4,7 @@ fall back to one worker when asked; the process map really uses a second process
 from __future__ import annotations
 
 import os
+import signal
 import time
 
 import pytest
@@ -40,6 +41,46 @@ def test_one_thread_when_the_batch_runner_asks_for_it(monkeypatch):
     monkeypatch.setenv("OMP_NUM_THREADS", "1")
     main = threading.get_ident()
     assert set(thread_map(lambda _: threading.get_ident(), range(8))) == {main}
+
+
+def test_thread_map_keeps_its_threads_and_runs_nested_maps_inline(monkeypatch):
+    import threading
+
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+
+    def slow_ident(_):  # slow enough that both threads take items
+        time.sleep(0.02)
+        return threading.get_ident()
+
+    first, second = set(thread_map(slow_ident, range(6))), set(thread_map(slow_ident, range(6)))
+    assert first == second and threading.get_ident() not in first  # the same two pool threads
+
+    def outer(x):  # a map inside a map item runs in that item's thread (no wait on a full pool)
+        me = threading.get_ident()
+        assert set(thread_map(lambda _: threading.get_ident(), range(4))) == {me}
+        return x
+
+    done = []
+    t = threading.Thread(target=lambda: done.append(thread_map(outer, range(4))))
+    t.start()
+    t.join(timeout=10)
+    assert done == [[0, 1, 2, 3]]
+
+
+def test_thread_map_in_a_forked_child(monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    thread_map(lambda x: x, range(4))  # the parent's pool exists before the fork
+
+    def in_child(x):  # the child's copy of the pool has no threads: it must make its own
+        time.sleep(0.05)  # slow enough that the forked child takes some of the items
+        signal.alarm(10)  # a child hung on a dead pool is killed; the parent then redoes its items
+        out = sum(thread_map(lambda y: y * x, range(5)))
+        signal.alarm(0)
+        return out, os.getpid()
+
+    out = process_map(in_child, range(6), n=2)
+    assert [v for v, _ in out] == [10 * x for x in range(6)]
+    assert len({pid for _, pid in out}) == 2
 
 
 def test_process_map_keeps_order_and_uses_a_second_process(monkeypatch):

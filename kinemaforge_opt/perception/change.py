@@ -59,17 +59,15 @@ def free_space_test(points_world: np.ndarray, camera: CameraInfo, T_world_camera
     pc = (points_world - p) @ R
     z = pc[:, 2]
     out = np.zeros(len(points_world), dtype=np.int8)
-    front = z > 1e-9
-    u = np.full(z.shape, -1)
-    v = np.full(z.shape, -1)
-    u[front] = np.round(camera.fx * pc[front, 0] / z[front] + camera.cx).astype(int)
-    v[front] = np.round(camera.fy * pc[front, 1] / z[front] + camera.cy).astype(int)
-    inside = front & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
-    idx = np.flatnonzero(inside)
+    front = np.flatnonzero(z > 1e-9)
+    u = np.round(camera.fx * pc[front, 0] / z[front] + camera.cx).astype(int)
+    v = np.round(camera.fy * pc[front, 1] / z[front] + camera.cy).astype(int)
+    inside = (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
+    idx = front[inside]
     # the window of pixel (v, u) is padded[v:v+3, u:u+3]: flat offsets from its corner
     width = padded.shape[1]
     window = (np.arange(3)[:, None] * width + np.arange(3)[None, :]).ravel()
-    readings = padded.ravel()[(v[idx] * width + u[idx])[:, None] + window]  # (n, 9), +inf = none
+    readings = padded.ravel()[(v[inside] * width + u[inside])[:, None] + window]  # (n, 9), +inf = none
     front_reading = readings.min(axis=1)
     seen = front_reading < np.inf
     idx, readings, front_reading = idx[seen], readings[seen], front_reading[seen]

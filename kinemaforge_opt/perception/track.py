@@ -545,18 +545,18 @@ class Tracker:
         disp = [np.linalg.norm(Ts[s][:3, :3] - np.eye(3)) * reach + np.linalg.norm(Ts[s][:3, 3]) for s in obs]
         steps = [obs[k] for k in np.argsort(disp)[::-1][:GROW_STEPS]]
         cloud = self.clouds[ref].points
-        in_part = np.zeros(len(cloud), dtype=bool)
         # the cloud's own copies of the points (exact at the reference step, within half a voxel
-        # when the points were carried there by a track)
-        in_part[cKDTree(points).query(cloud, distance_upper_bound=0.5 * self.voxel, workers=-1)[0] < np.inf] = True
+        # when the points were carried there by a track) are in the part already
+        tested = cKDTree(points).query(cloud, distance_upper_bound=0.5 * self.voxel, workers=-1)[0] < np.inf
         fine = ICP_FINE_VOXELS * self.voxel
         reach_r = CLUSTER_VOXELS * self.voxel
-        tested = in_part.copy()
         for plane in self.background:  # a floor slides along itself under a part's motion: never a tie to break
             tested |= np.abs(plane.distance(cloud)) <= self.plane_band
-        part = points
+        part = frontier = points
         for _ in range(GROW_ROUNDS):
-            near = cKDTree(part).query(cloud, distance_upper_bound=reach_r, workers=-1)[0] < np.inf
+            # every point near the part before the last round was tested in it: only the points
+            # the last round added can bring new candidates
+            near = cKDTree(frontier).query(cloud, distance_upper_bound=reach_r, workers=-1)[0] < np.inf
             cand = np.flatnonzero(near & ~tested)
             if cand.size == 0:
                 break
@@ -567,21 +567,21 @@ class Tracker:
                 """(3, n): hits minus violations under the track and the static hypothesis, and
                 violations under the track, of the candidates at step s."""
                 T = Ts[s]
-                tree = self.full_tree(s)
-                xs = x @ T[:3, :3].T + T[:3, 3]
-                cons_p, viol_p = self.verdicts(xs, s)
+                m = len(x)
+                # both hypotheses' points in one batch: moved by the track, then left in place
+                both = np.concatenate([x @ T[:3, :3].T + T[:3, 3], x])
+                cons, viol = self.verdicts(both, s)
+                on = (self.full_tree(s).query(both, distance_upper_bound=fine)[0] < np.inf).astype(int)
+                cons_p, viol_p = cons[:m], viol[:m]
                 seen = cons_p | viol_p  # compare only where the moved point can be observed
-                vs = self.verdicts(x, s)[1]
-                return np.stack([seen * ((tree.query(xs, distance_upper_bound=fine)[0] < np.inf).astype(int) - viol_p),
-                                 seen * ((tree.query(x, distance_upper_bound=fine)[0] < np.inf).astype(int) - vs),
-                                 viol_p])
+                return np.stack([seen * (on[:m] - viol_p), seen * (on[m:] - viol[m:]), viol_p])
 
             part_score, static_score, part_viol = np.sum(thread_map(scores, steps), axis=0)
             take = ((part_score > static_score) & (4 * part_viol <= len(steps))) | ((part_score == static_score) & (part_viol == 0))
             if not take.any():
                 break
-            in_part[cand[take]] = True
-            part = np.concatenate([part, x[take]])
+            frontier = x[take]
+            part = np.concatenate([part, frontier])
         return part
 
 
