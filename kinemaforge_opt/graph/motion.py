@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import savgol_coeffs
+from scipy.linalg import lstsq
 from scipy.spatial.transform import Rotation
 
 from ..errors import DataError
@@ -51,6 +51,16 @@ class RelativeMotion:
         return int(self.times.size)
 
 
+def savgol_smoothing(window: int) -> np.ndarray:
+    """(window,) Savitzky–Golay coefficients of a quadratic fit's centre value, for an odd
+    ``window``: ``scipy.signal.savgol_coeffs(window, 2)``, computed the same way (least squares
+    on the same design matrix, the same cut-off), bit for bit.  Written out because importing
+    scipy.signal imports scipy.stats, 0.75 s at the start of every command that fits joints."""
+    x = np.arange(-(window // 2), window - window // 2, dtype=float)[::-1]
+    A = x ** np.arange(3, dtype=float).reshape(-1, 1)
+    return lstsq(A, np.array([1.0, 0.0, 0.0]), cond=np.finfo(float).eps * window)[0]
+
+
 def noise_sigma(signal: np.ndarray) -> float:
     """Robust noise σ per coordinate of a (N, d) sampled signal (see module doc); SIGMA_FLOOR
     when the signal is exactly smooth or too short to tell."""
@@ -58,7 +68,7 @@ def noise_sigma(signal: np.ndarray) -> float:
     w = NOISE_WINDOW
     if x.shape[0] < w:
         return SIGMA_FLOOR
-    c = savgol_coeffs(w, 2)  # symmetric: convolution == correlation
+    c = savgol_smoothing(w)  # symmetric: convolution == correlation
     smooth = np.stack([np.convolve(x[:, j], c, mode="valid") for j in range(x.shape[1])], axis=1)
     e = x[w // 2 : x.shape[0] - w // 2] - smooth
     # Residual of one sample = (1 - c0) n_0 - sum_{j != 0} c_j n_j  =>  variance factor below.

@@ -29,7 +29,7 @@ from itertools import islice
 import networkx as nx
 import numpy as np
 from networkx.algorithms.tree.branchings import ArborescenceIterator
-from scipy.stats import norm
+from scipy.special import ndtri
 from threadpoolctl import threadpool_limits
 
 from ..errors import DataError
@@ -43,7 +43,7 @@ from .score import SIGNIFICANCE, closeness_z, log_posterior, score_pair
 MERGE_PROBABILITY = 0.95
 # Two candidate parents explain a child equally well when Vuong's closeness test cannot tell
 # them apart at the same 95 % level (two-sided): |z| within this (see :func:`_shallowest`).
-CLOSENESS_Z = float(norm.ppf(0.5 + MERGE_PROBABILITY / 2.0))
+CLOSENESS_Z = float(ndtri(0.5 + MERGE_PROBABILITY / 2.0))  # the standard normal quantile
 # log ρ of an impossible arc (ρ = 0).  Finite, and far below any real tree's Σ log ρ (the
 # smallest positive ρ gives −745 per arc): Edmonds' algorithm subtracts arc weights while it
 # contracts cycles, and −1e300 absorbs every other weight in those sums — on a moving-camera

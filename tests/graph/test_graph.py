@@ -179,3 +179,13 @@ def test_rigid_tree_edges_join_the_parent_part():
     assert tree.parts == {"base": ("world", "sticker"), "door": ("door", "knob")}
     assert [(j.parent, j.child, j.type) for j in tree.joints] == [("base", "door", "revolute")]
     assert tree.log_score == pytest.approx(np.log(0.9) + np.log(0.7) + np.log(0.6))
+
+
+@pytest.mark.parametrize("window", [3, 5, 7, 9, 21])
+def test_savgol_smoothing_equals_scipy_signal(window):
+    """The noise estimate's written-out Savitzky–Golay coefficients are scipy.signal's, bit for bit."""
+    from scipy.signal import savgol_coeffs
+
+    from kinemaforge_opt.graph.motion import savgol_smoothing
+
+    assert np.array_equal(savgol_smoothing(window), savgol_coeffs(window, 2))
