@@ -541,7 +541,8 @@ def reconstruct_sequence(seq_path: str | Path, out: str | Path | None = None, me
         write_urdf(model, out / "model.urdf")
         with atomic_path(out / "clouds.npz") as tmp:
             with open(tmp, "wb") as f:
-                np.savez_compressed(f, **clouds_world)
+                # uncompressed: deflate saves ~6 % on these float clouds and took 0.75 s
+                np.savez(f, **clouds_world)
         doc["timing_s"]["total"] = time.perf_counter() - start
         write_text_atomic(out / "reconstruction.json", json.dumps(doc, indent=2))
     return Reconstruction(per, graph, model, doc, clouds_world, labels)
