@@ -61,9 +61,10 @@ class _ThreadPool:
         return getattr(self._local, "worker", False)
 
     def get(self, n: int) -> ThreadPoolExecutor:
-        """The pool, with at least ``n`` threads."""
+        """The pool, of ``n`` threads (made again when ``n`` changes, which :func:`workers` does
+        only when OMP_NUM_THREADS is set anew)."""
         with self._lock:
-            if self._pool is None or self._size < n:
+            if self._pool is None or self._size != n:
                 if self._pool is not None:
                     self._pool.shutdown(wait=False)
                 self._pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix="kinemaforge",
@@ -87,8 +88,8 @@ def thread_map(fn: Callable[[X], Y], items: Sequence[X]) -> list[Y]:
     thread when that is one or there is one item).  An exception in ``fn`` propagates.  Called
     from within a ``thread_map`` item, it runs in that thread: the pool's threads are all
     taken by the outer map already, and waiting on the pool from inside it could deadlock."""
-    n = min(workers(), len(items))
-    if n <= 1 or _THREADS.in_worker():
+    n = workers()
+    if min(n, len(items)) <= 1 or _THREADS.in_worker():
         return [fn(x) for x in items]
     return list(_THREADS.get(n).map(fn, items))
 
