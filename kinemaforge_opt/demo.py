@@ -285,6 +285,8 @@ def run_main_demo(out_dir: str | Path, seed: int = 0, frames: int = DEMO_SIZE["f
     rec_dir = out_dir / "reconstruction"
     rec = reconstruct_sequence(paths.sequence, rec_dir)
     timing["reconstruct"] = time.perf_counter() - t0
+    for warning in rec.document["graph_warnings"]:
+        say(f"    warning: {warning['message']}")
     if not rec.model.movable_joints:
         raise NoJointFound(f"the reconstruction in {rec_dir} found no movable joint: nothing to verify or diagnose "
                            f"(try more --frames or a larger --size)")

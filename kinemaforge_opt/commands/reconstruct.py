@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from ..errors import InputFileError, KinemaforgeError
 from ..io.atomic import write_text_atomic
 
-# The pipeline's modules (open3d, scipy.signal, CasADi, Pinocchio) load in `run`, not here:
+# The pipeline's modules (open3d, CasADi, Pinocchio, pydrake) load in `run`, not here:
 # `kinemaforge --help` and argument errors then answer in a fraction of a second.
 
 HELP = """\
@@ -35,7 +36,10 @@ INPUT is one of
 How it works: every pair of tracks is fitted as rigid, prismatic, revolute and helical; BIC turns
 the fits into confidences; tracks joined rigidly merge into parts (the part holding the world is
 'base'); the tree is the maximum spanning arborescence on log-confidence.  A recording in which
-nothing moves is refused (exit 2) rather than given an invented joint.
+nothing moves is refused (exit 2) rather than given an invented joint.  A track kept rigid with
+a part although it moves relative to it (no joint type fits it: a part tracked badly, or a track
+spanning two parts) is a warning on stderr and in reconstruction.json["graph_warnings"]: the tree
+may miss a joint there.
 """
 
 
@@ -118,9 +122,10 @@ def run(args) -> int:
         inputs = [("", read_sturm_log(src))]
     else:
         inputs = [("", read_tracks(src))]
-    doc = {"joints": [], "links": [], "alternatives": {}, "method": args.method}
+    doc = {"joints": [], "links": [], "alternatives": {}, "method": args.method, "graph_warnings": []}
     for prefix, tracks in inputs:
         result = infer_tree(tracks, method=args.method, k_best=args.k_best)
+        doc["graph_warnings"] += [loose.record() for loose in result.best.loose]
         joints = _joints(result, prefix)
         if prefix:  # one log = one mechanism: keep parts apart per log
             for j in joints:
@@ -132,7 +137,14 @@ def run(args) -> int:
     for j in doc["joints"]:
         radius = f" radius {j['radius']:.3f} m" if "radius" in j else ""
         print(f"{j['name']}: {j['type']} {j['parent']} -> {j['child']}{radius} (ρ = {j['confidence']:.2f})")
+    _warn(doc["graph_warnings"])
     return 0
+
+
+def _warn(graph_warnings: list[dict]) -> None:
+    """The graph's warnings (``LooseTrack.record``) on stderr, one line each."""
+    for w in graph_warnings:
+        print(f"warning: {w['message']}", file=sys.stderr)
 
 
 def _run_sequence(args) -> int:
@@ -151,6 +163,7 @@ def _run_sequence(args) -> int:
     for note in (rec.document.get("nlp") or {}).get("notes", []):
         if note.startswith("axes:"):  # the gravity-aligned refit's decision (--free-axes turns it off)
             print(note)
+    _warn(rec.document["graph_warnings"])
     print(f"wrote {args.out / 'reconstruction.json'}, model.urdf, meshes/, clouds.npz "
           f"({rec.document['timing_s']['total']:.1f} s)", flush=True)
     if not rec.model.movable_joints:
@@ -159,8 +172,6 @@ def _run_sequence(args) -> int:
     try:
         v = verify_reconstruction(args.out, args.input, reconstruction=rec)
     except KinemaforgeError as e:  # the reconstruction stands; say why it could not be verified
-        import sys
-
         doc = dict(rec.document, verification={"error": str(e)})
         write_text_atomic(args.out / "reconstruction.json", json.dumps(doc, indent=2))
         print(f"kinemaforge reconstruct: the Drake verification failed: {e}", file=sys.stderr)

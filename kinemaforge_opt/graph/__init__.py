@@ -7,10 +7,10 @@ motion (``relative_motion``); ``score_pair`` turns fits into type probabilities.
 from .fit import JOINT_TYPES, JointHypothesis, fit_all, fit_relation
 from .motion import WORLD, RelativeMotion, noise_sigma, relative_motion
 from .score import score_pair
-from .tree import GraphResult, KinematicTree, TreeJoint, infer_tree
+from .tree import GraphResult, KinematicTree, LooseTrack, TreeJoint, infer_tree
 
 __all__ = [
     "JOINT_TYPES", "JointHypothesis", "fit_all", "fit_relation", "WORLD", "RelativeMotion",
-    "noise_sigma", "relative_motion", "score_pair", "GraphResult", "KinematicTree", "TreeJoint",
+    "noise_sigma", "relative_motion", "score_pair", "GraphResult", "KinematicTree", "LooseTrack", "TreeJoint",
     "infer_tree",
 ]

@@ -67,17 +67,56 @@ class TreeJoint:
 
 
 @dataclass(frozen=True, eq=False)
+class LooseTrack:
+    """A track the tree keeps rigid with a part although it moves relative to it: the arc's most
+    probable type is rigid (no joint type explains the track better — typically none fits its
+    orientations), yet the rigid fit misfits its positions beyond the noise.  The tree may miss a
+    joint there (a part tracked badly, e.g. shut flush with the body and seen by few cameras), or
+    the track spans two parts.  track: the arc's child part (its first track's name); part: the
+    part it joined; rigid: the rigid fit; best_moving: the most probable moving type (the best fit
+    of the positions among equally improbable ones; None when the edge holds no moving fit)."""
+
+    track: str
+    part: str
+    rigid: JointHypothesis
+    best_moving: JointHypothesis | None
+
+    def _fits(self) -> list[JointHypothesis]:
+        return [self.rigid] + ([self.best_moving] if self.best_moving is not None else [])
+
+    def record(self) -> dict:
+        """The reconstruction.json entry (SI units) with :meth:`message`."""
+        r, m = self.rigid, self.best_moving
+        return {"track": self.track, "part": self.part, "rigid_rms_m": float(r.residual_rms),
+                "best_moving_type": None if m is None else m.type,
+                "best_moving_rms_m": None if m is None else float(m.residual_rms),
+                "noise_m": float(r.noise_sigma), "rotation_rms_rad": float(min(h.rotation_rms for h in self._fits())),
+                "message": self.message()}
+
+    def message(self) -> str:
+        """One line for a person: what moves, by how much, and what the tree did with it."""
+        r, m = self.rigid, self.best_moving
+        against = "" if m is None else f" against {m.type} {m.residual_rms * 1e3:.0f} mm"
+        return (f"track {self.track} is kept rigid with part {self.part} although it moves relative to it: "
+                f"rigid fit {r.residual_rms * 1e3:.0f} mm RMS{against} (noise {r.noise_sigma * 1e3:.1f} mm), "
+                f"no joint type fitting its orientations better than {min(h.rotation_rms for h in self._fits()):.3f} "
+                "rad RMS; a joint may be missing there, or the track spans two parts")
+
+
+@dataclass(frozen=True, eq=False)
 class KinematicTree:
     """A kinematic tree over merged parts.
 
     root: the base part's name (holds the world).  parts: {part name: member track names}.
     joints: parent-before-child order.  log_score: Σ log ρ over the joints (higher is better).
+    loose: the tracks it keeps rigid with a part although they move relative to it (:class:`LooseTrack`).
     """
 
     root: str
     parts: dict[str, tuple[str, ...]]
     joints: tuple[TreeJoint, ...]
     log_score: float
+    loose: tuple[LooseTrack, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -223,6 +262,7 @@ def _tree(root, parts, edges, arcs) -> KinematicTree:
     erratically — is no body of its own either)."""
     rigid_score = 0.0
     owner = {p: p for p in parts}
+    moving_rigid = []  # rigid arcs whose rigid fit misfits the child's positions
 
     def top(p):
         while owner[p] != p:
@@ -234,6 +274,11 @@ def _tree(root, parts, edges, arcs) -> KinematicTree:
         if h.type == "rigid" and h.confidence > 0:  # all-zero ρ is no choice (greedy's last resort)
             owner[b] = a
             rigid_score += _log(h.confidence)
+            if not _adequate_rigid(h):
+                moving_rigid.append((a, b, h))
+    loose = tuple(LooseTrack(b, top(a), h, max((m for m in edges[(a, b)].values() if m.type != "rigid"),
+                                               key=lambda m: (m.confidence, -m.residual_rms), default=None))
+                  for a, b, h in moving_rigid)
     if any(owner[p] != p for p in parts):
         merged: dict[str, list[str]] = {}
         for p in parts:
@@ -254,7 +299,7 @@ def _tree(root, parts, edges, arcs) -> KinematicTree:
     joints = tuple(
         TreeJoint(f"j{i}", a, b, _best_type(edges[(a, b)])) for i, (a, b) in enumerate(order)
     )
-    return KinematicTree(root, parts, joints, rigid_score + sum(_log(j.hypothesis.confidence) for j in joints))
+    return KinematicTree(root, parts, joints, rigid_score + sum(_log(j.hypothesis.confidence) for j in joints), loose)
 
 
 def _carrier(edges, anc: str, parent: str, child: str) -> str | None:

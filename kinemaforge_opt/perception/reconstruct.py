@@ -529,6 +529,7 @@ def reconstruct_sequence(seq_path: str | Path, out: str | Path | None = None, me
         "alternatives": [{"log_score": t.log_score, "joints": [[j.parent, j.child, j.type] for j in t.joints]}
                          for t in graph.alternatives],
         "method": method,
+        "graph_warnings": [loose.record() for loose in graph.best.loose],
         "nlp": nlp_doc if nlp_doc is not None else {"enabled": False},
         "perception": {"depth_noise_k_per_m": per.noise.k, "voxel_m": per.voxel,
                        "proposals": len(per.proposals), "environment_planes": len(per.environment)},

@@ -3,6 +3,7 @@
 from factories import shared_data_dir
 import glob
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ import pytest
 from kinemaforge_opt.cli import main
 from kinemaforge_opt.errors import DataError
 from kinemaforge_opt.graph import fit_all, infer_tree, relative_motion, score_pair
-from kinemaforge_opt.io.tracks import PoseTracks, read_sturm_log, write_tracks
+from kinemaforge_opt.io.tracks import PoseTracks, read_sturm_log, read_tracks, write_tracks
 from kinemaforge_opt.spatial import axis_angle_error, line_distance, make_transform, screw_motion, translation_motion
 
 STURM = str(shared_data_dir() / "real" / "articulation" / "mechanisms_iros_2010")
@@ -179,6 +180,9 @@ def test_rigid_tree_edges_join_the_parent_part():
     assert tree.parts == {"base": ("world", "sticker"), "door": ("door", "knob")}
     assert [(j.parent, j.child, j.type) for j in tree.joints] == [("base", "door", "revolute")]
     assert tree.log_score == pytest.approx(np.log(0.9) + np.log(0.7) + np.log(0.6))
+    # the sticker moves (20σ) yet is kept rigid: a warning; the knob is rigid within the noise
+    assert [(w.track, w.part, w.best_moving) for w in tree.loose] == [("sticker", "base", None)]
+    assert tree.loose[0].message().startswith("track sticker is kept rigid with part base although it moves")
 
 
 @pytest.mark.parametrize("window", [3, 5, 7, 9, 21])
@@ -189,3 +193,25 @@ def test_savgol_smoothing_equals_scipy_signal(window):
     from kinemaforge_opt.graph.motion import savgol_smoothing
 
     assert np.array_equal(savgol_smoothing(window), savgol_coeffs(window, 2))
+
+
+CHEST_THREE_VIEWS = Path(__file__).parent / "data" / "chest_three_views_424x240_tracks.csv"
+
+
+def test_a_moving_track_kept_rigid_is_a_warning(tmp_path, capsys):
+    """Perception's tracks of a three-drawer chest seen by three cameras at 424×240
+    (protocol_drawer_1@s8,v3,f40,424x240): track p0 is drawer_1 (its seed points are drawer_1's
+    pixels in the synthetic world's labels), which the truth's recording pulls out 0.26 m.  While
+    it is shut, flush with the body, its track slides and turns, no joint type fits its
+    orientations, and the tree keeps it rigid with the base: a lost joint, which the tree must
+    report rather than hide."""
+    res = infer_tree(read_tracks(CHEST_THREE_VIEWS))
+    assert "p0" in res.best.parts["base"]  # the lost drawer (what the warning is about)
+    (loose,) = res.best.loose
+    assert (loose.track, loose.part, loose.best_moving.type) == ("p0", "base", "prismatic")
+    assert loose.rigid.residual_rms > 0.1 > 3 * loose.best_moving.residual_rms  # it moves, along a line
+    assert main(["reconstruct", str(CHEST_THREE_VIEWS), "-o", str(tmp_path)]) == 0
+    err = capsys.readouterr().err
+    assert "warning: track p0 is kept rigid with part base although it moves relative to it" in err
+    (w,) = json.loads((tmp_path / "reconstruction.json").read_text())["graph_warnings"]
+    assert w["track"] == "p0" and w["best_moving_type"] == "prismatic" and w["rigid_rms_m"] > 0.1

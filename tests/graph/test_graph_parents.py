@@ -191,6 +191,7 @@ def test_drawers_opened_in_turn_all_hang_from_the_body(seed):
     res = infer_tree(_drawers_in_turn(np.random.default_rng(seed), noise=seed is not None))
     assert _arcs(res) == {("base", f"drawer_{i}", "prismatic") for i in range(3)}
     assert res.best.parts["base"] == ("world", "body")
+    assert res.best.loose == ()  # every track is a joint's or rigid within the noise: nothing to warn of
 
 
 def _brute_force_best(parts, rho) -> float:
