@@ -86,7 +86,8 @@ class Diagnosis:
     # prediction RMS / noise}}``; None when no such check was needed.
     acceptance_check: dict | None = None
     # Effects the search selected and a later check dropped: {check: ["<type> on <joint>", ...]},
-    # check one of "simulation_check", "acceptance_check", "interval_check".
+    # check one of "simulation_check", "acceptance_check", "interval_check" (with "_unscored" appended
+    # when no piece of its span was long enough to simulate).
     dropped: dict = field(default_factory=dict)
 
     @property
@@ -118,6 +119,10 @@ class Diagnosis:
                          f"predicts the {span_words(check.get('span'))} better (dropped: "
                          f"{dropped['acceptance_check']}): the remaining mismatch is model-form error the library "
                          "cannot express")
+        elif not self.effects and (unscored := [v for c, v in dropped.items() if c.endswith("_unscored")]):
+            lines.append(f"the search selected {unscored[0]}, but no piece of the span that would check it is long "
+                         "enough to simulate (each needs 8 samples, its first ones fit its starting state): "
+                         "unverified, no effect is reported")
         elif not self.effects and dropped.get("simulation_check"):
             lines.append(f"the search selected {dropped['simulation_check']}, but the selection did not simulate the "
                          "fit span better than the nominal model by more than the noise: no effect is reported")
@@ -137,10 +142,14 @@ class Diagnosis:
             if self.effects and dropped.get(c):
                 lines.append(f"dropped {dropped[c]}: {words}")
         used = self.other_used_for_selection
+        unscored = "no sample could be predicted (each piece needs 8 samples, its first ones fit its starting state)"
         for k, h in enumerate(self.held_out_others):
             note = " (used to accept the effects: not independent)" if k == used else ""
-            lines.append(f"other recording {k + 1}: prediction RMS before {h.rms_before:.4g}, after {h.rms_after:.4g}{note}")
-        if self.held_out is not None:
+            lines.append(f"other recording {k + 1}: prediction RMS before {h.rms_before:.4g}, after {h.rms_after:.4g}{note}"
+                         if h.scored else f"other recording {k + 1}: {unscored}")
+        if self.held_out is not None and not self.held_out.scored:
+            lines.append(f"held-out span: {unscored}")
+        elif self.held_out is not None:
             lines.append(f"held-out prediction RMS: before {self.held_out.rms_before:.4g}, after "
                          f"{self.held_out.rms_after:.4g} (×{self.held_out.rms_before / max(self.held_out.rms_after, 1e-12):.1f} better)"
                          + ("" if (x := check.get("signal_sigma", {}).get("held_out")) is None or x >= THRESHOLD_SIGMA

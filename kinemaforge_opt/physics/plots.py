@@ -80,11 +80,11 @@ def plot_diagnosis(d: Diagnosis, out_dir: str | Path) -> list[Path]:
     fig.tight_layout()
     paths.append(_save(fig, out_dir / "residual_state.png"))
 
-    if d.held_out is not None:
+    if d.held_out is not None and d.held_out.scored:
         paths.append(_before_after(d.held_out, names, "held-out span: recorded vs simulated, before and after",
                                    "recorded (held out)", out_dir / "fit_before_after.png"))
     for k, h in enumerate(d.held_out_others):
-        if h.t.size:
+        if h.scored:
             role = "judged acceptance" if k == d.other_used_for_selection else "independent"
             paths.append(_before_after(h, names, f"other recording {k + 1} ({role}): recorded vs predicted, "
                                        "before and after", "recorded", out_dir / f"other_{k + 1}_before_after.png"))

@@ -37,12 +37,18 @@ class HeldOut:
     q_after: np.ndarray
 
     @property
+    def scored(self) -> bool:
+        """False when no sample of the span could be predicted (every piece too short to fit its
+        starting state from): then both RMS are NaN."""
+        return bool(self.t.size)
+
+    @property
     def rms_before(self) -> float:
-        return float(np.sqrt(np.mean((self.q_before - self.q_rec) ** 2)))
+        return float(np.sqrt(np.mean((self.q_before - self.q_rec) ** 2))) if self.scored else float("nan")
 
     @property
     def rms_after(self) -> float:
-        return float(np.sqrt(np.mean((self.q_after - self.q_rec) ** 2)))
+        return float(np.sqrt(np.mean((self.q_after - self.q_rec) ** 2))) if self.scored else float("nan")
 
     def gain_sigma(self, sigma_q: np.ndarray) -> float:
         """How much better the after-model predicts, in noise sigmas: the drop of the RMS error

@@ -32,8 +32,9 @@ def drift_before_after(d: Diagnosis, recording: Recording) -> dict[str, dict[str
 def diagnosis_dict(d: Diagnosis, drift_m: dict | None = None) -> dict:
     """The ``diagnosis.json`` document."""
     fit = {}
-    for label, rms in (("before", d.held_out.rms_before if d.held_out else None),
-                       ("after", d.held_out.rms_after if d.held_out else None)):
+    scored = d.held_out is not None and d.held_out.scored  # else no held-out RMS (null)
+    for label, rms in (("before", d.held_out.rms_before if scored else None),
+                       ("after", d.held_out.rms_after if scored else None)):
         fit[label] = {"rms": rms, "drift_m": (drift_m or {}).get(label, {}),
                       "fit_rms": float(np.sqrt(np.mean(((d.nominal_fit if label == "before" else d.final_fit).q_fit
                                                          - d.nominal_fit.recording.q) ** 2)))}
@@ -47,7 +48,7 @@ def diagnosis_dict(d: Diagnosis, drift_m: dict | None = None) -> dict:
         "held_out_used_for_selection": d.held_out_used_for_selection,
         "acceptance_check": d.acceptance_check,
         "dropped": d.dropped,
-        "others": [{"rms_before": h.rms_before, "rms_after": h.rms_after,
+        "others": [{"rms_before": h.rms_before if h.scored else None, "rms_after": h.rms_after if h.scored else None,
                     "used_for_selection": k == d.other_used_for_selection} for k, h in enumerate(d.held_out_others)],
     }
 

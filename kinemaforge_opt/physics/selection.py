@@ -633,6 +633,13 @@ class EffectSearch:
         keys = self.chosen()
         self.say(doing.format(n=len(self.selected)))
         h = first or predict_before_after(self.nominal_model, self.model_of(self.current), span, span_s)
+        if keys and not h.scored:  # no piece long enough to simulate: nothing verifies the selection
+            self.tested.append({check: [f"{e} on {j}" for j, e, _ in self.selected], "unscored": True})
+            self.dropped.setdefault(f"{stage}_unscored", []).extend(f"{e} on {j}" for j, e, _ in self.selected)
+            self.selected.clear()
+            self.current = self.nominal_trial
+            self.equivalents.clear()
+            return
         while True:
             gain = h.gain_sigma(self.sigma_q)
             self.tested.append({check: [f"{e} on {j}" for j, e, _ in self.selected], rms_key: [h.rms_before, h.rms_after],

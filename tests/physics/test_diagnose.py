@@ -225,3 +225,21 @@ def test_prediction_gain_is_counted_in_noise_sigmas_per_joint():
     h = HeldOut(np.arange(4.0), q, before, after)
     assert h.gain_sigma(np.array([0.01, 0.1])) == pytest.approx(1.0)
     assert h.gain_sigma(np.array([0.02, 0.2])) == pytest.approx(0.5)
+
+
+def test_a_recording_too_sparse_to_simulate_reports_nothing_and_says_why(tmp_path):
+    """At camera rate (the door's 30-Hz recording kept at 3.75 Hz, as a reconstruction's
+    recording.csv can be) no piece of the fit span or of the held-out span holds the 8 samples a
+    simulated piece needs: the search's selection cannot be checked by simulation, so nothing is
+    reported, and the summary, diagnosis.json and the plots say so instead of failing."""
+    model, rec = _door_recording(lambda j: (E("coulomb_friction", j, 0.3), E("viscous_damping", j, 0.2)))
+    sparse = Recording(rec.t[::8], rec.joint_names, rec.q[::8], tau=rec.tau[::8])
+    d = diagnose(model, sparse)
+    assert d.effects == ()
+    assert not d.held_out.scored and "held-out span: no sample could be predicted" in d.summary()
+    assert d.dropped["simulation_check_unscored"]  # what the search selected is named, unverified
+    assert "no piece of the span that would check it is long enough to simulate" in d.summary()
+    paths = write_diagnosis(d, sparse, tmp_path, with_drift=False)
+    doc = json.loads(paths["diagnosis"].read_text())
+    assert doc["fit"]["before"]["rms"] is None and doc["fit"]["after"]["rms"] is None
+    assert "fit_before_after" not in paths and paths["residual_time"].stat().st_size > 1000
