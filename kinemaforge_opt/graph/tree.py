@@ -81,8 +81,11 @@ class LooseTrack:
     rigid: JointHypothesis
     best_moving: JointHypothesis | None
 
-    def _fits(self) -> list[JointHypothesis]:
-        return [self.rigid] + ([self.best_moving] if self.best_moving is not None else [])
+    @property
+    def rotation_rms(self) -> float:
+        """The orientation misfit [rad] of the better of the two fits."""
+        fits = (self.rigid,) if self.best_moving is None else (self.rigid, self.best_moving)
+        return min(h.rotation_rms for h in fits)
 
     def record(self) -> dict:
         """The reconstruction.json entry (SI units) with :meth:`message`."""
@@ -90,8 +93,7 @@ class LooseTrack:
         return {"track": self.track, "part": self.part, "rigid_rms_m": float(r.residual_rms),
                 "best_moving_type": None if m is None else m.type,
                 "best_moving_rms_m": None if m is None else float(m.residual_rms),
-                "noise_m": float(r.noise_sigma), "rotation_rms_rad": float(min(h.rotation_rms for h in self._fits())),
-                "message": self.message()}
+                "noise_m": float(r.noise_sigma), "rotation_rms_rad": float(self.rotation_rms), "message": self.message()}
 
     def message(self) -> str:
         """One line for a person: what moves, by how much, and what the tree did with it."""
@@ -99,7 +101,7 @@ class LooseTrack:
         against = "" if m is None else f" against {m.type} {m.residual_rms * 1e3:.0f} mm"
         return (f"track {self.track} is kept rigid with part {self.part} although it moves relative to it: "
                 f"rigid fit {r.residual_rms * 1e3:.0f} mm RMS{against} (noise {r.noise_sigma * 1e3:.1f} mm), "
-                f"no joint type fitting its orientations better than {min(h.rotation_rms for h in self._fits()):.3f} "
+                f"no joint type fitting its orientations better than {self.rotation_rms:.3f} "
                 "rad RMS; a joint may be missing there, or the track spans two parts")
 
 

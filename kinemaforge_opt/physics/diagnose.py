@@ -57,7 +57,7 @@ from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..nlp.joint_space import friction_smoothing, match_recording, noise_std
 from .locate import THRESHOLD_SIGMA, JointMismatch, locate
-from .predict import HeldOut, predict_before_after, quantisation_sigma
+from .predict import TOO_SPARSE, HeldOut, predict_before_after, quantisation_sigma
 from .selection import CANDIDATES, DELTA_BIC, MAX_EFFECTS, SCREEN, EffectSearch, FoundEffect, span_words
 
 # The hypothesis search runs on block means of the recording at no less than this rate [Hz]:
@@ -121,8 +121,7 @@ class Diagnosis:
                          "cannot express")
         elif not self.effects and (unscored := [v for c, v in dropped.items() if c.endswith("_unscored")]):
             lines.append(f"the search selected {unscored[0]}, but no piece of the span that would check it is long "
-                         "enough to simulate (each needs 8 samples, its first ones fit its starting state): "
-                         "unverified, no effect is reported")
+                         f"enough to simulate ({TOO_SPARSE}): unverified, no effect is reported")
         elif not self.effects and dropped.get("simulation_check"):
             lines.append(f"the search selected {dropped['simulation_check']}, but the selection did not simulate the "
                          "fit span better than the nominal model by more than the noise: no effect is reported")
@@ -142,13 +141,13 @@ class Diagnosis:
             if self.effects and dropped.get(c):
                 lines.append(f"dropped {dropped[c]}: {words}")
         used = self.other_used_for_selection
-        unscored = "no sample could be predicted (each piece needs 8 samples, its first ones fit its starting state)"
+        unpredicted = f"no sample could be predicted ({TOO_SPARSE})"
         for k, h in enumerate(self.held_out_others):
             note = " (used to accept the effects: not independent)" if k == used else ""
             lines.append(f"other recording {k + 1}: prediction RMS before {h.rms_before:.4g}, after {h.rms_after:.4g}{note}"
-                         if h.scored else f"other recording {k + 1}: {unscored}")
+                         if h.scored else f"other recording {k + 1}: {unpredicted}")
         if self.held_out is not None and not self.held_out.scored:
-            lines.append(f"held-out span: {unscored}")
+            lines.append(f"held-out span: {unpredicted}")
         elif self.held_out is not None:
             lines.append(f"held-out prediction RMS: before {self.held_out.rms_before:.4g}, after "
                          f"{self.held_out.rms_after:.4g} (×{self.held_out.rms_before / max(self.held_out.rms_after, 1e-12):.1f} better)"

@@ -15,6 +15,10 @@ from ..model.articulated import ArticulatedModel
 # Held-out prediction: each model's starting state is fitted over this first part of a span [s]
 # (see simulate_recording); the rest of the span is the prediction that is scored.
 STATE_WINDOW_S = 0.3
+# A piece of a span with fewer samples is not simulated (too few to fit its starting state from).
+MIN_PIECE_SAMPLES = 8
+# Why an unscored span (:attr:`HeldOut.scored`) has no prediction, in words.
+TOO_SPARSE = f"each piece needs {MIN_PIECE_SAMPLES} samples, its first ones fit its starting state"
 
 # Simulations (held-out and fit-span checks): CVODES tolerances (relative, absolute [rad or m]),
 # far below the encoder noise; the starting state's least-squares fit differentiates them with
@@ -90,7 +94,7 @@ def simulate_segments(model: ArticulatedModel, rec: Recording, segment_s: float 
     parts = []
     for a, b in zip(edges[:-1], edges[1:]):
         m = (rec.t >= a) & (rec.t < b)
-        if m.sum() < 8:
+        if m.sum() < MIN_PIECE_SAMPLES:
             parts.append(np.full((m.sum(), rec.q.shape[1]), np.nan))
             continue
         seg = rec.window(rec.t[m][0], rec.t[m][-1])
