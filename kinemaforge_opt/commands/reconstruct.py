@@ -4,6 +4,7 @@ reconstruction.json (and, from a sequence, model.urdf, meshes/ and clouds.npz)."
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -125,11 +126,13 @@ def run(args) -> int:
     doc = {"joints": [], "links": [], "alternatives": {}, "method": args.method, "graph_warnings": []}
     for prefix, tracks in inputs:
         result = infer_tree(tracks, method=args.method, k_best=args.k_best)
-        doc["graph_warnings"] += [loose.record() for loose in result.best.loose]
         joints = _joints(result, prefix)
+        loose = result.best.loose
         if prefix:  # one log = one mechanism: keep parts apart per log
             for j in joints:
                 j["parent"], j["child"] = prefix + j["parent"], prefix + j["child"]
+            loose = [dataclasses.replace(w, track=prefix + w.track, part=prefix + w.part) for w in loose]
+        doc["graph_warnings"] += [w.record() for w in loose]
         doc["joints"] += joints
         doc["links"] += [{"name": prefix + p, "tracks": list(m)} for p, m in result.best.parts.items()]
         doc["alternatives"][prefix.rstrip("_") or "tracks"] = _alternatives(result)

@@ -215,3 +215,20 @@ def test_a_moving_track_kept_rigid_is_a_warning(tmp_path, capsys):
     assert "warning: track p0 is kept rigid with part base although it moves relative to it" in err
     (w,) = json.loads((tmp_path / "reconstruction.json").read_text())["graph_warnings"]
     assert w["track"] == "p0" and w["best_moving_type"] == "prismatic" and w["rigid_rms_m"] > 0.1
+
+
+def test_a_folder_of_logs_names_the_log_of_each_warning(tmp_path, capsys):
+    """In a folder of Sturm logs each log is its own mechanism and its parts are named after it
+    (``<log>_base``); a warning names the same parts.  003.log is a real right door; wobble.log a
+    gripper wandering 3 mm per sample at random, which no joint type explains."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "003.log").write_text(Path(f"{STURM}/right_door/003.log").read_text())
+    np.savetxt(logs / "wobble.log", np.cumsum(np.random.default_rng(0).normal(0.0, 0.003, (300, 3)), axis=0), fmt="%.5f")
+    assert main(["reconstruct", str(logs), "-o", str(tmp_path / "out")]) == 0
+    doc = json.loads((tmp_path / "out" / "reconstruction.json").read_text())
+    (w,) = doc["graph_warnings"]
+    assert w["part"] == "wobble_base" and w["part"] in {link["name"] for link in doc["links"]}
+    assert f"warning: track {w['track']} is kept rigid with part wobble_base" in capsys.readouterr().err
+    (door,) = doc["joints"]  # the wobble is no joint: the door's alone
+    assert door["parent"] == "003_base" and door["type"] == "revolute"
