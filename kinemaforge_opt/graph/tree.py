@@ -304,9 +304,10 @@ def _tree(root, parts, edges, arcs) -> KinematicTree:
     return KinematicTree(root, parts, joints, rigid_score + sum(_log(j.hypothesis.confidence) for j in joints), loose)
 
 
-def _carrier(edges, anc: str, parent: str, child: str) -> str | None:
+def _carrier(edges, anc: str, parent: str, child: str, held: JointHypothesis) -> str | None:
     """Which of ``parent`` and its ancestor ``anc`` the child moves with, by joint travel: "anc",
-    "parent", or None when the travel cannot tell.
+    "parent", or None when the travel cannot tell.  ``held``: the best fit of the arc parent ->
+    child.
 
     A child carried by its parent travels *less* relative to it than relative to the ancestor
     (the parent's own travel is added); a child that stays put while its parent moves travels
@@ -317,7 +318,6 @@ def _carrier(edges, anc: str, parent: str, child: str) -> str | None:
     (floored at SIGMA_FLOOR's) and orientations not clearly worse (:func:`_turns_worse`; a hinge
     fitted from the base to a folding door's second leaf leaves its turn unexplained, and its q
     says nothing)."""
-    held = _best_type(edges[(parent, child)])
     if held.type == "rigid" or (anc, parent) not in edges or _best_type(edges[(anc, parent)]).type != held.type:
         return None
     same, own = edges[(anc, child)][held.type], edges[(anc, parent)][held.type]
@@ -375,7 +375,7 @@ def _shallowest(root, edges, arcs) -> list[tuple[str, str]]:
                 if (anc, c) not in edges:
                     continue
                 alt = _best_type(edges[(anc, c)])
-                carrier = _carrier(edges, anc, parent[c], c)
+                carrier = _carrier(edges, anc, parent[c], c, held)
                 as_well = abs(closeness_z(held, alt)) <= CLOSENESS_Z and not _turns_worse(alt, held)
                 if alt.confidence > 0 and (carrier == "anc" or carrier is None and as_well):
                     parent[c] = anc
