@@ -4,6 +4,9 @@ SHELL := /bin/bash
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
+# No pip cache: the wheels (drake, open3d, mujoco: ~1 GB) would otherwise be kept twice on disk, and a
+# CI machine once ran out of space installing them (`[Errno 28] No space left on device`).
+export PIP_NO_CACHE_DIR := 1
 STAMP := $(VENV)/.kinemaforge-installed
 # Debian packages the project needs at run time (open3d: libGL/EGL/X11 and libusb; OpenMP: libgomp;
 # MuJoCo headless rendering: EGL) and at build time (the native bridge: g++).
