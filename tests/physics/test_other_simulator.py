@@ -1,0 +1,85 @@
+"""``diagnose`` on recordings made by another simulator than the synthetic world's MuJoCo: Drake's
+continuous MultibodyPlant, whose joint damping and RevoluteSpring / PrismaticSpring force
+elements are Drake's own (``verify.plant`` only declares them).  ``diagnose`` fits with the
+bridge's ABA (Pinocchio on CasADi), so neither the truth's equations nor its integrator are the
+estimator's.  Coulomb friction is left out: Drake has no joint friction, and the verifier's
+applied friction force is this project's own law.
+
+The hand is open loop here: sin² pushes that set the nominal joint's speed out, back and to rest
+(the true joint, damped or sprung, then moves otherwise), sampled at 30 Hz with encoder noise."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from kinemaforge_opt.io.recording import Recording
+from kinemaforge_opt.model import JointDynamics
+from kinemaforge_opt.model.pinocchio import build_pin_model
+from kinemaforge_opt.physics.diagnose import diagnose
+from kinemaforge_opt.synth.objects import make_object
+from kinemaforge_opt.verify.simulate import simulate_at
+
+RECORD_HZ = 30
+DURATION_S = 7.0
+PUSH_S, COAST_S = 0.6, 1.9
+NOISE = {"cabinet": 2e-3, "drawer": 1e-3}  # [rad], [m]
+REST_TOLERANCE = {"cabinet": 0.05, "drawer": 0.005}  # [rad], [m]
+
+
+def _pushes(t: np.ndarray, inertia: float, span: float) -> np.ndarray:
+    """(T,) joint force [N·m or N]: three sin² pushes of PUSH_S, COAST_S apart, that give a joint of
+    ``inertia`` [kg·m² or kg] the speed +v, then −v, then 0 (v carries it half of ``span`` per
+    stroke)."""
+    v = 0.5 * span / (PUSH_S / 2 + COAST_S)
+    tau = np.zeros_like(t)
+    for k, dv in enumerate((v, -2 * v, v)):
+        start = 0.3 + k * (PUSH_S + COAST_S)
+        m = (t >= start) & (t <= start + PUSH_S)
+        tau[m] += 2 * inertia * dv / PUSH_S * np.sin(np.pi * (t[m] - start) / PUSH_S) ** 2
+    return tau
+
+
+def _drake_recording(category: str, **true_dynamics):
+    """The nominal one-joint object of ``category`` and a recording of it with
+    ``true_dynamics`` (JointDynamics fields) simulated by Drake's continuous plant."""
+    obj = make_object(category, 0)
+    (joint,) = obj.model.movable_joints
+    lim = joint.limits
+    q0 = np.array([lim.lower + 0.3 * (lim.upper - lim.lower)])
+    pm = build_pin_model(obj.model)
+    inertia = float(pin.crba(pm, pm.createData(), q0)[0, 0])
+    t = np.arange(0.0, DURATION_S + 0.5 / RECORD_HZ, 1.0 / RECORD_HZ)
+    tau = _pushes(t, inertia, lim.upper - lim.lower)[:, None]
+    names = obj.model.joint_names
+    forcing = Recording(t, names, np.zeros((len(t), 1)), tau=tau)
+    truth = obj.model.with_joint(joint.name, dynamics=JointDynamics(**true_dynamics))
+    motion = simulate_at(truth, q0, np.zeros(1), t, tau=forcing, discrete=False)
+    q = motion.q + np.random.default_rng(0).normal(0.0, NOISE[category], motion.q.shape)
+    return obj.model, Recording(t, names, q, tau=tau)
+
+
+@pytest.mark.parametrize("category", ["cabinet", "drawer"])
+def test_the_nominal_physics_of_another_simulator_shows_no_effect(category):
+    """Drake's and the bridge's dynamics of the same URDF agree: nothing is reported."""
+    model, rec = _drake_recording(category)
+    d = diagnose(model, rec)
+    assert d.effects == (), d.summary()
+
+
+@pytest.mark.parametrize("category, true, found", [
+    ("cabinet", dict(damping=0.4), {"viscous_damping": 0.4}),
+    ("drawer", dict(damping=4.0), {"viscous_damping": 4.0}),
+    ("cabinet", dict(spring_stiffness=3.0, spring_rest=0.9), {"spring": 3.0}),
+    ("drawer", dict(spring_stiffness=30.0, spring_rest=0.14), {"spring": 30.0}),
+    ("cabinet", dict(damping=0.4, spring_stiffness=3.0, spring_rest=0.9), {"viscous_damping": 0.4, "spring": 3.0}),
+])
+def test_drake_damping_and_springs_are_named_and_measured(category, true, found):
+    model, rec = _drake_recording(category, **true)
+    d = diagnose(model, rec)
+    assert {e.type: e.value for e in d.effects} == pytest.approx(found, rel=0.05), d.summary()
+    for e in d.effects:
+        if e.type == "spring":
+            assert e.params["rest"] == pytest.approx(true["spring_rest"], abs=REST_TOLERANCE[category])
+    assert d.held_out.rms_after <= d.held_out.rms_before
