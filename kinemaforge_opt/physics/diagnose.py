@@ -21,7 +21,12 @@
    earlier effect is swapped for a decisively better one (ΔBIC < ``DELTA_BIC``) or dropped if it
    no longer earns its place.  Alternatives that fit as well as the chosen one (log-likelihood
    within ``EQUIVALENT_LOGLIK``) are reported with it (``params["equivalent"]``): e.g. a
-   prismatic joint's axis tilt and a constant bias are the same force in joint space.  When even
+   prismatic joint's axis tilt and a constant bias are the same force in joint space.  A
+   recording without an applied force fixes the links' inertia only relative to one another: the
+   equations of motion hold for any common scale of every moving link's inertia and every joint
+   force (a pendulum three times lighter with a third of the damping swings the same), so a set
+   that frees every moving link's inertia is not tested, and the forces found are in the units of
+   the model's inertia (the summary says so).  When even
    the final set leaves residual above the located-mismatch level (model-form error the library
    cannot express), the set must also predict data outside the fit better than the nominal model,
    else effects are dropped: the held-out span if it shows signal (the nominal prediction of it
@@ -157,6 +162,7 @@ class Diagnosis:
         for key in ("gate_reason", "reason"):
             if check.get(key):
                 lines.append(f"({check[key]})")
+        lines += [f"({t['identifiability']})" for t in self.tested if "identifiability" in t]
         return "\n".join(lines)
 
 

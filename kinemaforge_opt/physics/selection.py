@@ -22,6 +22,11 @@ from .search import CPU_CAP_STATUS, HypothesisFit, Trial, effect_parameters
 
 DELTA_BIC = -10.0
 
+# What a recording without an applied force cannot determine (EffectSearch.identifiable).
+UNFORCED_WORDS = ("no applied force was recorded: the data fix the links' inertia only relative to one another and "
+                  "the joint forces only relative to the inertia, so the forces found are in the units of the model's "
+                  "inertia, and a common scale of every moving link's inertia is not tested")
+
 # An accepted effect must also matter: it must move the fitted trajectory by at least this RMS,
 # in units of the encoder noise (else it only polishes residual model-form error).
 MIN_EFFECT_SIZE_SIGMA = 1.0
@@ -259,6 +264,11 @@ class EffectSearch:
         self.candidates, self.segment_s, self.screen = candidates, segment_s, screen
         self.other_recordings, self.say = other_recordings, say
         self.stops = limit_stop_guess(model, srch)
+        # Without an applied force the equations of motion hold for any common scale of every
+        # moving link's inertia (mass included, so gravity's torque too) and every joint force:
+        # the data fix inertia only relative to other links' (:meth:`identifiable`).
+        self.forced = srch.tau is not None and bool(np.any(srch.tau != 0.0))
+        self.moving_links = {j.child for j in model.movable_joints}
         self.hyps = [(j, e) for j in model.joint_names for e in candidates if e != "axis_tilt"]
         self.fits = {"base": HypothesisFit(model, srch, self.hyps, segment_s, self.stops, CANDIDATE_MAX_ITER,
                                            sigma_s, eps)}
@@ -280,6 +290,19 @@ class EffectSearch:
         self.tested: list[dict] = []
         self.dropped: dict[str, list[str]] = {}
         self.current = self.nominal_trial
+        if not self.forced:
+            self.tested.append({"identifiability": UNFORCED_WORDS})
+
+    def identifiable(self, effects: list[tuple[str, str]]) -> bool:
+        """Whether the recording can tell the (joint, effect) set from its equivalents: without an
+        applied force, a set that frees the inertia of every moving link holds their common scale,
+        which only trades against the joint forces' (a pendulum three times lighter with a third
+        of the damping swings the same), so it is not tested; the joint forces found are then in
+        the units of the model's inertia (module doc of :mod:`.diagnose`)."""
+        if self.forced:
+            return True
+        freed = {self.model.joint(j).child for j, e in effects if e == "inertia_error"}
+        return not self.moving_links <= freed
 
     # --- fits ------------------------------------------------------------------------------
 
@@ -449,7 +472,7 @@ class EffectSearch:
             rounds += 1
             rss0 = self.rss(self.current)
             pending = [(j, e) for j in self.model.joint_names for e in self.candidates
-                       if not any(s[:2] == (j, e) for s in self.selected)]
+                       if not any(s[:2] == (j, e) for s in self.selected) and self.identifiable(self.chosen() + [(j, e)])]
             rows = self.fit_round(self.screened(pending, self.chosen(), strong_before))
             if not rows:
                 break
@@ -560,7 +583,7 @@ class EffectSearch:
             keep = [x[:2] for k, x in enumerate(self.selected) if k != i]
             k_old = n_free_params(effect_parameters(model, *self.selected[i][:2]))
             others = [(j, e) for j in model.joint_names for e in self.candidates
-                      if (j, e) not in keep and (j, e) != self.selected[i][:2]]
+                      if (j, e) not in keep and (j, e) != self.selected[i][:2] and self.identifiable(keep + [(j, e)])]
             swaps = []
             tried = self.screened(others, keep, strong_before)
             for joint, effect in tried:

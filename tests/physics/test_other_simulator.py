@@ -15,7 +15,7 @@ import pinocchio as pin
 import pytest
 
 from kinemaforge_opt.io.recording import Recording
-from kinemaforge_opt.model import JointDynamics
+from kinemaforge_opt.model import ArticulatedModel, Inertial, Joint, JointDynamics, Link
 from kinemaforge_opt.model.pinocchio import build_pin_model
 from kinemaforge_opt.physics.diagnose import diagnose
 from kinemaforge_opt.synth.objects import make_object
@@ -83,3 +83,41 @@ def test_drake_damping_and_springs_are_named_and_measured(category, true, found)
         if e.type == "spring":
             assert e.params["rest"] == pytest.approx(true["spring_rest"], abs=REST_TOLERANCE[category])
     assert d.held_out.rms_after <= d.held_out.rms_before
+
+
+def _pendulum(damping: float, scale: float = 1.0) -> ArticulatedModel:
+    """A 0.4-m rod of ``scale`` kg on a horizontal hinge with viscous ``damping`` [N·m·s/rad]."""
+    length = 0.4
+    rod = Inertial(scale, np.array([0.0, 0.0, -length / 2]), scale * np.diag([length**2 / 12, length**2 / 12, 1e-4]))
+    hinge = Joint("hinge", "continuous", "base", "rod", np.eye(4), np.array([1.0, 0.0, 0.0]),
+                  dynamics=JointDynamics(damping=damping))
+    return ArticulatedModel("pendulum", (Link("base"), Link("rod", rod)), (hinge,))
+
+
+def _swing(truth: ArticulatedModel, tau: np.ndarray | None = None) -> Recording:
+    """6 s of ``truth`` released at 1 rad (under the joint force ``tau`` (T, 1) [N·m], if any),
+    simulated by Drake, at 30 Hz with 2 mrad noise."""
+    t = np.arange(0.0, 6.0 + 0.5 / RECORD_HZ, 1.0 / RECORD_HZ)
+    forcing = None if tau is None else Recording(t, ("hinge",), np.zeros((len(t), 1)), tau=tau)
+    motion = simulate_at(truth, np.array([1.0]), np.zeros(1), t, tau=forcing, discrete=False)
+    return Recording(t, ("hinge",), motion.q + np.random.default_rng(0).normal(0.0, 2e-3, motion.q.shape), tau=tau)
+
+
+def test_without_a_force_the_inertia_scale_is_not_reported_as_the_missing_physics():
+    """A free swing cannot tell a rod three times lighter from three times the damping (the
+    equations of motion divide through by the scale): the report is the joint force, in the
+    units of the model's inertia — the damping the model had, corrected."""
+    d = diagnose(_pendulum(0.01), _swing(_pendulum(0.03)))
+    assert [(e.type, e.params.get("nominal")) for e in d.effects] == [("viscous_damping", 0.01)], d.summary()
+    assert d.effects[0].value == pytest.approx(0.03, rel=0.05)
+    assert "no applied force was recorded" in d.summary()
+
+
+def test_with_a_recorded_force_the_inertia_error_is_found():
+    """The same rod 1.5 times heavier, pushed by a recorded torque: the force fixes the scale."""
+    t = np.arange(0.0, 6.0 + 0.5 / RECORD_HZ, 1.0 / RECORD_HZ)
+    tau = (0.3 * np.sin(2 * np.pi * 0.7 * t) * (t < 3.0))[:, None]
+    d = diagnose(_pendulum(0.01), _swing(_pendulum(0.01, scale=1.5), tau))
+    assert {e.type: e.value for e in d.effects} == pytest.approx({"inertia_error": 1.5}, rel=0.05), d.summary()
+    assert "no applied force" not in d.summary()
+
