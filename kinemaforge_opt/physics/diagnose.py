@@ -61,7 +61,7 @@ from ..errors import DataError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..nlp.joint_space import friction_smoothing, match_recording, noise_std
-from .locate import THRESHOLD_SIGMA, JointMismatch, locate
+from .locate import THRESHOLD_SIGMA, JointMismatch, block_means, locate
 from .predict import TOO_SPARSE, HeldOut, predict_before_after, quantisation_sigma
 from .selection import CANDIDATES, DELTA_BIC, MAX_EFFECTS, SCREEN, EffectSearch, FoundEffect, span_words
 
@@ -177,12 +177,8 @@ def block_average(rec: Recording, k: int) -> Recording:
     incomplete block is dropped).  k = 1 returns ``rec`` itself."""
     if k <= 1:
         return rec
-    T = (rec.t.size // k) * k
-
-    def mean(a):
-        return None if a is None else a[:T].reshape(T // k, k, *a.shape[1:]).mean(axis=1)
-
-    return Recording(mean(rec.t), rec.joint_names, mean(rec.q), mean(rec.v), mean(rec.tau))
+    return Recording(block_means(rec.t, k), rec.joint_names, block_means(rec.q, k), block_means(rec.v, k),
+                     block_means(rec.tau, k))
 
 
 def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
@@ -270,7 +266,7 @@ def diagnose(
     say("fitting the nominal model" if k_dec == 1 else
         f"fitting the nominal model ({1 / srch.dt:.0f} Hz search grid, {k_dec}-sample block means)")
     search = EffectSearch(model, srch, sigma_q, sigma_s, sigma_signal, friction_smoothing(srch), candidates,
-                           segment_s, screen, other_recordings, say, workers)
+                           segment_s, screen, other_recordings, say, workers, fit_rec=fit_rec)
     search.select(max_effects)
     search.simulation_check()
     acceptance, judged_by_held_out = search.acceptance_check(held)

@@ -19,6 +19,13 @@ from ..model.articulated import ArticulatedModel
 from ..model.pinocchio import inverse_dynamics
 
 THRESHOLD_SIGMA = 3.0  # a window is flagged when its running RMS exceeds this many noise sigmas
+# Savitzky–Golay window of the derivatives [s] ...
+DERIVATIVE_WINDOW_S = 0.15
+# ... at most this over the motion's RMS angular frequency ω (:func:`motion_window`): a cubic
+# fit's acceleration of a sinusoid is low by ≈ 0.08 (ω h)² for a half-window h, so ω h ≤ 0.5 keeps
+# that bias under 2 % (a pendulum swinging at 2.5 Hz under a 0.15-s window: 9 %, larger than the
+# damping force the pre-screen looks for).
+DERIVATIVE_HALF_WINDOW_RAD = 0.5
 
 
 @dataclass(frozen=True)
@@ -38,11 +45,20 @@ class JointMismatch:
     regions: dict[str, float]
 
 
+def block_means(a: np.ndarray | None, k: int) -> np.ndarray | None:
+    """Means of (T, ...) ``a`` over consecutive blocks of ``k`` samples (a last incomplete block
+    is dropped); None stays None."""
+    if a is None or k <= 1:
+        return a
+    T = (len(a) // k) * k
+    return a[:T].reshape(T // k, k, *a.shape[1:]).mean(axis=1)
+
+
 def smooth_derivatives(rec: Recording, window_s: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Savitzky–Golay (cubic) q, v, a (each (T, n)) from the recorded q; window ≈ 0.15 s, at least
-    7 samples."""
+    """Savitzky–Golay (cubic) q, v, a (each (T, n)) from the recorded q; window ``window_s``
+    (default DERIVATIVE_WINDOW_S), at least 7 samples."""
     dt = rec.dt
-    w = max(7, int(round((window_s or 0.15) / dt)) | 1)
+    w = max(7, int(round((window_s or DERIVATIVE_WINDOW_S) / dt)) | 1)
     w = min(w, rec.t.size - 1 + rec.t.size % 2)  # the longest odd window the recording holds
     q = savgol_filter(rec.q, w, 3, axis=0)
     v = savgol_filter(rec.q, w, 3, deriv=1, delta=dt, axis=0)
@@ -50,12 +66,34 @@ def smooth_derivatives(rec: Recording, window_s: float | None = None) -> tuple[n
     return q, v, a
 
 
-def inverse_dynamics_residual(model: ArticulatedModel, rec: Recording) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(residual force (T, n) [N·m or N], q, v, a) of ``model`` along ``rec``."""
-    q, v, a = smooth_derivatives(rec)
+def motion_window(rec: Recording) -> float:
+    """Savitzky–Golay window [s] for ``rec``'s derivatives: DERIVATIVE_WINDOW_S, shortened so that
+    its half-window is at most DERIVATIVE_HALF_WINDOW_RAD over the fastest joint's RMS angular
+    frequency sqrt(mean a² / mean v²) on its moving samples.  The frequency is estimated under the
+    default window, then once more under the window that gives (a long window underestimates a
+    fast motion's acceleration, and so its frequency)."""
+    window = DERIVATIVE_WINDOW_S
+    for _ in range(2):
+        _, v, a = smooth_derivatives(rec, window)
+        omega = 0.0
+        for k in range(v.shape[1]):
+            moving = np.abs(v[:, k]) > 0.05 * np.sqrt(np.mean(v[:, k] ** 2))
+            if moving.any():
+                omega = max(omega, float(np.sqrt(np.mean(a[moving, k] ** 2) / np.mean(v[moving, k] ** 2))))
+        window = min(DERIVATIVE_WINDOW_S, 2.0 * DERIVATIVE_HALF_WINDOW_RAD / omega) if omega > 0 else DERIVATIVE_WINDOW_S
+    return window
+
+
+def inverse_dynamics_residual(model: ArticulatedModel, rec: Recording, window_s: float | None = None,
+                              block: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(residual force (T, n) [N·m or N], q, v, a) of ``model`` along ``rec``, derivatives under a
+    ``window_s`` window (:func:`smooth_derivatives`); with ``block`` > 1, each as its means over
+    blocks of that many samples (on a search grid made of such means)."""
+    q, v, a = smooth_derivatives(rec, window_s)
     tau = rec.tau if rec.tau is not None else np.zeros_like(q)
     passive = np.stack([j.dynamics.passive_force(q[:, k], v[:, k]) for k, j in enumerate(model.movable_joints)], axis=1)
-    return inverse_dynamics(model, q, v, a) - tau - passive, q, v, a
+    r = inverse_dynamics(model, q, v, a) - tau - passive
+    return block_means(r, block), block_means(q, block), block_means(v, block), block_means(a, block)
 
 
 def _windows(t: np.ndarray, flagged: np.ndarray, min_gap_s: float) -> tuple[tuple[float, float], ...]:

@@ -15,7 +15,7 @@ from ..model.articulated import ArticulatedModel
 from ..model.pinocchio import build_pin_model, inverse_dynamics
 from ..nlp.joint_space import build_joint_space_fit, match_recording, velocity_estimate
 from ..parallel import process_map
-from .locate import THRESHOLD_SIGMA, inverse_dynamics_residual
+from .locate import THRESHOLD_SIGMA, inverse_dynamics_residual, motion_window
 from .predict import HeldOut, predict_before_after, prediction_signal
 from .prescreen import limit_stop_guess, linear_init, screen_scores
 from .search import CPU_CAP_STATUS, HypothesisFit, Trial, effect_parameters
@@ -253,11 +253,14 @@ class EffectSearch:
     sigma_q (n,): the encoder noise of one recorded sample; sigma_s (n,): the noise of the
     search grid's block means; sigma_signal (n,): the level a span's nominal prediction error
     must pass to show signal; eps (n,): the smooth-sign width [rad/s or m/s].  workers: processes
-    for a round's independent hypothesis fits (None: :func:`~kinemaforge_opt.parallel.workers`)."""
+    for a round's independent hypothesis fits (None: :func:`~kinemaforge_opt.parallel.workers`).
+    fit_rec: the full-rate fit span whose block means ``srch`` is (the pre-screen's derivatives
+    come from it; default ``srch``)."""
 
     def __init__(self, model: ArticulatedModel, srch: Recording, sigma_q: np.ndarray, sigma_s: np.ndarray,
                  sigma_signal: np.ndarray, eps: np.ndarray, candidates: tuple[str, ...], segment_s: float | None,
-                 screen: int | None, other_recordings: tuple[Recording, ...], say, workers: int | None = None):
+                 screen: int | None, other_recordings: tuple[Recording, ...], say, workers: int | None = None,
+                 fit_rec: Recording | None = None):
         self.model, self.srch = model, srch
         self.workers = workers
         self.sigma_q, self.sigma_s, self.sigma_signal, self.eps = sigma_q, sigma_s, sigma_signal, eps
@@ -275,9 +278,14 @@ class EffectSearch:
         self.nominal_trial = self.fits["base"].solve([])
         self.nominal_z = {n: self.fits["base"].nominal_z(n) for n in self.fits["base"].blocks}
         self.v_scale = np.sqrt(np.mean(velocity_estimate(srch) ** 2, axis=0))
-        # the missing generalised force, on the search grid (block means: full-rate accelerations
-        # are mostly differentiated noise, which the inertia column of the pre-screen then "explains")
-        self.r_nom, self.q_s, self.v_s, a_s = inverse_dynamics_residual(model, srch)
+        # the missing generalised force on the search grid: derivatives of the full-rate fit span
+        # under a window short against the motion (a fast swing's acceleration, smoothed over a
+        # long window, comes out low, and the pre-screen's inertia column "explains" that error),
+        # then block means (full-rate accelerations alone are mostly differentiated noise, which
+        # the inertia column would "explain" too)
+        full = srch if fit_rec is None else fit_rec
+        block = max(1, int(round(srch.dt / full.dt)))
+        self.r_nom, self.q_s, self.v_s, a_s = inverse_dynamics_residual(model, full, motion_window(full), block)
         self.id_force = inverse_dynamics(model, self.q_s, self.v_s, a_s)
         self.nominal_model = _model_of(model, self.nominal_trial, self.stops)
         self.n_res = srch.q.size

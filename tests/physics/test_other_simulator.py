@@ -10,12 +10,14 @@ The hand is open loop here: sin² pushes that set the nominal joint's speed out,
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pytest
 
 from kinemaforge_opt.io.recording import Recording
-from kinemaforge_opt.model import ArticulatedModel, Inertial, Joint, JointDynamics, Link
+from kinemaforge_opt.model import ArticulatedModel, Inertial, Joint, JointDynamics, Link, read_urdf
 from kinemaforge_opt.model.pinocchio import build_pin_model
 from kinemaforge_opt.physics.diagnose import diagnose
 from kinemaforge_opt.synth.objects import make_object
@@ -120,4 +122,25 @@ def test_with_a_recorded_force_the_inertia_error_is_found():
     d = diagnose(_pendulum(0.01), _swing(_pendulum(0.01, scale=1.5), tau))
     assert {e.type: e.value for e in d.effects} == pytest.approx({"inertia_error": 1.5}, rel=0.05), d.summary()
     assert "no applied force" not in d.summary()
+
+
+FURUTA = Path(__file__).resolve().parents[2] / "models" / "furuta" / "furuta.urdf"
+
+
+def test_a_free_furuta_swing_with_both_dampings_wrong_names_both():
+    """The Furuta pendulum of the Qube's published parameters, released at 1.2 rad with five
+    times the arm's and four times the pendulum's damping, 8 s at 250 Hz: the pendulum swings at
+    ~2.5 Hz, where derivatives smoothed over the default 0.15 s come out 9 % low; the pre-screen
+    then ranked the pendulum's damping below every other hypothesis and the search reported an
+    inertia error and quadratic drag instead."""
+    nominal = read_urdf(FURUTA)
+    truth = nominal.with_joint("theta", dynamics=JointDynamics(damping=1.5e-3)).with_joint(
+        "alpha", dynamics=JointDynamics(damping=2e-4))
+    t = np.arange(0.0, 8.0 + 1e-9, 0.004)
+    motion = simulate_at(truth, np.array([0.0, 1.2]), np.zeros(2), t, discrete=False)
+    rec = Recording(t, nominal.joint_names, motion.q + np.random.default_rng(0).normal(0.0, 1e-3, motion.q.shape))
+    d = diagnose(nominal, rec)
+    found = {(e.joint, e.type): e.value for e in d.effects}
+    assert found == pytest.approx({("theta", "viscous_damping"): 1.5e-3, ("alpha", "viscous_damping"): 2e-4},
+                                  rel=0.05), d.summary()
 

@@ -1,0 +1,44 @@
+"""The derivatives behind the inverse-dynamics residual (physics.locate): the Savitzky–Golay
+window follows the motion's speed, checked against analytic derivatives of sinusoids."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinemaforge_opt.io.recording import Recording
+from kinemaforge_opt.physics.locate import DERIVATIVE_WINDOW_S, block_means, motion_window, smooth_derivatives
+
+
+def _sine(freq_hz: float, rate_hz: float = 250.0, seconds: float = 4.0) -> tuple[Recording, np.ndarray]:
+    """A joint swinging at ``freq_hz`` (1 rad amplitude) and its analytic acceleration."""
+    t = np.arange(0.0, seconds, 1.0 / rate_hz)
+    w = 2 * np.pi * freq_hz
+    return Recording(t, ("j",), np.sin(w * t)[:, None]), -(w**2) * np.sin(w * t)
+
+
+def _gain(a: np.ndarray, exact: np.ndarray, edge: int = 50) -> float:
+    """Least-squares gain of an estimated acceleration against the exact one (edges left out)."""
+    a, exact = a[edge:-edge, 0], exact[edge:-edge]
+    return float(a @ exact / (exact @ exact))
+
+
+def test_a_fast_swing_gets_a_window_short_enough_for_its_acceleration():
+    rec, exact = _sine(2.5)
+    window = motion_window(rec)
+    assert window < DERIVATIVE_WINDOW_S
+    assert _gain(smooth_derivatives(rec)[2], exact) < 0.95  # the default window: > 5 % low
+    # ≈ 2 % low (DERIVATIVE_HALF_WINDOW_RAD; the window is rounded to whole samples)
+    assert _gain(smooth_derivatives(rec, window)[2], exact) == pytest.approx(1.0, abs=0.025)
+
+
+def test_a_slow_motion_keeps_the_default_window():
+    rec, exact = _sine(0.2)
+    assert motion_window(rec) == DERIVATIVE_WINDOW_S
+    assert _gain(smooth_derivatives(rec)[2], exact) == pytest.approx(1.0, abs=0.01)
+
+
+def test_block_means_average_whole_blocks():
+    a = np.arange(14.0).reshape(7, 2)
+    np.testing.assert_allclose(block_means(a, 3), [[2.0, 3.0], [8.0, 9.0]])
+    assert block_means(a, 1) is a and block_means(None, 3) is None
