@@ -64,6 +64,7 @@ from ..nlp.joint_space import friction_smoothing, match_recording, noise_std
 from .locate import THRESHOLD_SIGMA, JointMismatch, block_means, locate
 from .predict import TOO_SPARSE, HeldOut, predict_before_after, quantisation_sigma
 from .selection import CANDIDATES, DELTA_BIC, MAX_EFFECTS, SCREEN, EffectSearch, FoundEffect, span_words
+from .search import CPU_CAP_STATUS
 
 # The hypothesis search runs on block means of the recording at no less than this rate [Hz]:
 # the effects of the library are low-bandwidth forces, so a recording sampled faster carries no
@@ -94,6 +95,7 @@ class Diagnosis:
     # check one of "simulation_check", "acceptance_check", "interval_check" (with "_unscored" appended
     # when no piece of its span was long enough to simulate).
     dropped: dict = field(default_factory=dict)
+    segment_s: float | None = None  # the fit's segment length [s] (None: one trajectory)
 
     @property
     def other_used_for_selection(self) -> int | None:
@@ -130,6 +132,12 @@ class Diagnosis:
         elif not self.effects and dropped.get("simulation_check"):
             lines.append(f"the search selected {dropped['simulation_check']}, but the selection did not simulate the "
                          "fit span better than the nominal model by more than the noise: no effect is reported")
+        elif not self.effects and any(m.windows_s for m in self.mismatch):
+            capped = sorted({f"{t['type'].replace('_', ' ')} on {t['joint']}" for t in self.tested
+                             if t.get("status") == CPU_CAP_STATUS})
+            lines.append(f"no effect is supported by the data (ΔBIC threshold {DELTA_BIC:g}): the mismatch located "
+                         "above remains unexplained" + (f"; the fits of {', '.join(capped)} did not converge within "
+                                                        "their CPU budget" if capped else ""))
         elif not self.effects:
             lines.append("no effect is supported by the data (ΔBIC threshold "
                          f"{DELTA_BIC:g}): the nominal model explains the recording to its noise level")
@@ -163,6 +171,9 @@ class Diagnosis:
             if check.get(key):
                 lines.append(f"({check[key]})")
         lines += [f"({t['identifiability']})" for t in self.tested if "identifiability" in t]
+        if not self.effects and self.segment_s is None and any(m.windows_s for m in self.mismatch):
+            lines.append("(the recording was fitted as one trajectory: a long recording of a sensitive system, such "
+                         "as a swinging pendulum, may fit only in pieces; try segment_s=1, `--segment 1`)")
         return "\n".join(lines)
 
 
@@ -285,4 +296,4 @@ def diagnose(
         others.append(predict_before_after(model, final.model, match_recording(model, other), segment_s))
     return Diagnosis(tuple(mismatch), tuple(found), tuple(search.tested), nominal, final, final.model, held_out,
                      tuple(others), held_out_used_for_selection=judged_by_held_out, acceptance_check=acceptance,
-                     dropped=search.dropped)
+                     dropped=search.dropped, segment_s=segment_s)
