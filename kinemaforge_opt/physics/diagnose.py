@@ -38,7 +38,11 @@
    ``PREDICTION_TRIES`` of them, strongest first, be judged by that first other recording
    instead: the first that predicts it better by more than the noise is accepted (an effect the
    system has shows in every recording of it; polishing one recording's model-form error does
-   not carry over to another);
+   not carry over to another).  Whatever the fit span said, a selection that predicts the held-out span worse than the
+   nominal model by more than a noise sigma is contradicted by data outside the fit (a friction
+   invented to hold a door against a stiff stop halts it where it coasts on): effects are dropped
+   as in the simulation check until it predicts the span no worse, which then is not independent
+   (the summary says so);
 3. re-fits the nominal model and the model with every selected effect at the full rate (started
    from their search-grid solutions; 95 % intervals from the fit's sensitivity), drops an effect
    the model lacked whose interval holds its "off" value, and writes the augmented model;
@@ -86,13 +90,15 @@ class Diagnosis:
     model: ArticulatedModel
     held_out: HeldOut | None
     held_out_others: tuple[HeldOut, ...] = ()
-    held_out_used_for_selection: bool = False  # True when model-form error forced a held-out check
+    # True when the held-out span judged the selection: model-form error forced a check on it, or
+    # the selection predicted it worse than the nominal model (it is then not independent)
+    held_out_used_for_selection: bool = False
     # The prediction check that model-form error forced (see ``diagnose``): ``{"span": "held_out" |
     # "other_recording_<k>" (1-based) | None, "reason": str, "signal_sigma": {span: nominal
     # prediction RMS / noise}}``; None when no such check was needed.
     acceptance_check: dict | None = None
     # Effects the search selected and a later check dropped: {check: ["<type> on <joint>", ...]},
-    # check one of "simulation_check", "acceptance_check", "interval_check" (with "_unscored" appended
+    # check one of "simulation_check", "acceptance_check", "held_out_check", "interval_check" (with "_unscored" appended
     # when no piece of its span was long enough to simulate).
     dropped: dict = field(default_factory=dict)
     segment_s: float | None = None  # the fit's segment length [s] (None: one trajectory)
@@ -129,6 +135,9 @@ class Diagnosis:
         elif not self.effects and (unscored := [v for c, v in dropped.items() if c.endswith("_unscored")]):
             lines.append(f"the search selected {unscored[0]}, but no piece of the span that would check it is long "
                          f"enough to simulate ({TOO_SPARSE}): unverified, no effect is reported")
+        elif not self.effects and dropped.get("held_out_check"):
+            lines.append(f"the search selected {dropped['held_out_check']}, but with them the model predicts the "
+                         "held-out span worse than the nominal model: no effect is reported")
         elif not self.effects and dropped.get("simulation_check"):
             lines.append(f"the search selected {dropped['simulation_check']}, but the selection did not simulate the "
                          "fit span better than the nominal model by more than the noise: no effect is reported")
@@ -150,7 +159,8 @@ class Diagnosis:
                          f"(95% [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]), ΔBIC {e.delta_bic:.0f}")
         for c, words in (("simulation_check", "simulating the fit span no better"),
                          ("acceptance_check", f"predicting the {span_words(check.get('span'))} no better"),
-                         ("interval_check", "its 95% interval holding the off value")):
+                         ("interval_check", "its 95% interval holding the off value"),
+                         ("held_out_check", "predicting the held-out span worse than the nominal model")):
             if self.effects and dropped.get(c):
                 lines.append(f"dropped {dropped[c]}: {words}")
         used = self.other_used_for_selection
@@ -162,7 +172,8 @@ class Diagnosis:
         if self.held_out is not None and not self.held_out.scored:
             lines.append(f"held-out span: {unpredicted}")
         elif self.held_out is not None:
-            lines.append(f"held-out prediction RMS: before {self.held_out.rms_before:.4g}, after "
+            lines.append(("held-out span (used to check the effects: not independent)" if self.dropped.get("held_out_check")
+                          else "held-out") + f" prediction RMS: before {self.held_out.rms_before:.4g}, after "
                          f"{self.held_out.rms_after:.4g} (×{self.held_out.rms_before / max(self.held_out.rms_after, 1e-12):.1f} better)"
                          + ("" if (x := check.get("signal_sigma", {}).get("held_out")) is None or x >= THRESHOLD_SIGMA
                             else f"; the nominal model errs there by only {x:.1f} noise sigmas: the span shows no "
@@ -171,7 +182,7 @@ class Diagnosis:
             if check.get(key):
                 lines.append(f"({check[key]})")
         lines += [f"({t['identifiability']})" for t in self.tested if "identifiability" in t]
-        if not self.effects and self.segment_s is None and any(m.windows_s for m in self.mismatch):
+        if not self.effects and self.segment_s is None and any(t.get("status") == CPU_CAP_STATUS for t in self.tested):
             lines.append("(the recording was fitted as one trajectory: a long recording of a sensitive system, such "
                          "as a swinging pendulum, may fit only in pieces; try segment_s=1, `--segment 1`)")
         return "\n".join(lines)
@@ -281,6 +292,7 @@ def diagnose(
     search.select(max_effects)
     search.simulation_check()
     acceptance, judged_by_held_out = search.acceptance_check(held)
+    judged_by_held_out = judged_by_held_out or search.held_out_check(held)
     say("re-fitting with the selected effects" + ("" if k_dec == 1 else f" at the full {1 / fit_rec.dt:.0f} Hz"))
     nominal, final = search.final_fits(fit_rec, k_dec)
     mismatch = locate(model, fit_rec, nominal.q_fit, sigma_q)

@@ -654,13 +654,13 @@ class EffectSearch:
     # --- checks of the selection ------------------------------------------------------------
 
     def drop_until_better(self, span: Recording, span_s: float | None, check: str, rms_key: str, doing: str,
-                          stage: str, first: HeldOut | None = None) -> None:
+                          stage: str, first: HeldOut | None = None, required_gain: float = MIN_EFFECT_SIZE_SIGMA) -> None:
         """Drop selected effects until the selection simulates ``span`` better than the nominal
-        model by MIN_EFFECT_SIZE_SIGMA noise sigmas or more (or none is left): backward
-        elimination, each step dropping the effect whose removal (the rest re-fitted) simulates
-        ``span`` best.  ``doing``: progress text, formatted with the number of effects ``n``;
-        ``stage``: the key of ``dropped`` the dropped effects are listed under; ``first``: the
-        current selection's prediction of ``span`` if already made."""
+        model by ``required_gain`` noise sigmas or more (or none is left): backward elimination,
+        each step dropping the effect whose removal (the rest re-fitted) simulates ``span`` best.
+        ``doing``: progress text, formatted with the number of effects ``n``; ``stage``: the key of
+        ``dropped`` the dropped effects are listed under; ``first``: the current selection's
+        prediction of ``span`` if already made."""
         keys = self.chosen()
         self.say(doing.format(n=len(self.selected)))
         h = first or predict_before_after(self.nominal_model, self.model_of(self.current), span, span_s)
@@ -676,7 +676,7 @@ class EffectSearch:
             self.tested.append({check: [f"{e} on {j}" for j, e, _ in self.selected], rms_key: [h.rms_before, h.rms_after],
                                 "gain_sigma": gain})
             # better by more than the noise: a smaller gain is no evidence the selection explains the motion
-            if gain >= MIN_EFFECT_SIZE_SIGMA or not keys:
+            if gain >= required_gain or not keys:
                 return
             options = []  # (prediction, dropped effect, trial) per removal
             for key in keys:
@@ -705,6 +705,24 @@ class EffectSearch:
         like every other effect: the model holds its stop."""
         self.drop_until_better(self.srch, self.segment_s or SIMULATION_CHECK_S, "simulation_check",
                                "fit_span_simulated_rms", "simulating the fit span with {n} effect(s)", "simulation_check")
+
+    def held_out_check(self, held: Recording | None) -> bool:
+        """Whether the held-out span ``held`` judged the selection.  A selection that predicts it
+        worse than the nominal model by more than MIN_EFFECT_SIZE_SIGMA noise sigmas is
+        contradicted by data outside the fit, whatever the fit span said (a friction invented to
+        hold a door against a stiff stop halts the door where it coasts on): effects are then
+        dropped as in the simulation check until it predicts the span no worse, and the span is no
+        longer independent (the summary says so)."""
+        if held is None or not self.selected:
+            return False
+        self.say("checking the effects against the held-out span")
+        h = predict_before_after(self.nominal_model, self.model_of(self.current), held, self.segment_s)
+        if not h.scored or h.gain_sigma(self.sigma_q) >= -MIN_EFFECT_SIZE_SIGMA:
+            return False
+        self.drop_until_better(held, self.segment_s, "held_out_check", "prediction_rms",
+                               "checking {n} effect(s) on the held-out span", "held_out_check", first=h,
+                               required_gain=-MIN_EFFECT_SIZE_SIGMA)
+        return True
 
     def acceptance_check(self, held: Recording | None) -> tuple[dict | None, bool]:
         """(``Diagnosis.acceptance_check``, whether the held-out span judged it).
