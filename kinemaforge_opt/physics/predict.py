@@ -176,7 +176,7 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
 
     The initial state is the smoothed first state of the recording, or, with ``state_window_s``
     [s], the state that best reproduces (least squares) the model's motion over the first
-    ``state_window_s`` of the recording — each model gets its own best starting state, as an
+    ``state_window_s`` of the recording (or its first max(5, 2n + 1) samples, if more) — each model gets its own best starting state, as an
     observer would give it; those samples are then fitted, not predicted, and come back as NaN.
     (A state differentiated from a few noisy samples at the edge of a span can be so far off
     that it dominates the prediction error of every model alike.)"""
@@ -203,9 +203,12 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
     x0 = np.concatenate([q0[0], v0[0]])
     window = np.zeros(rec.t.size, dtype=bool)
     if state_window_s:
-        window = rec.t <= rec.t[0] + state_window_s
+        # at least enough samples to fit the 2n state components from (a slow recording's first
+        # 0.3 s may hold two or three)
+        need = max(5, 2 * n + 1)
+        window = rec.t <= rec.t[0] + max(state_window_s, (rec.t[min(need, rec.t.size) - 1] - rec.t[0]))
         m = int(window.sum())
-        if m >= max(5, 2 * n + 1) and m < rec.t.size:
+        if m >= need and m < rec.t.size:
             scale = np.concatenate([np.full(n, 1.0), np.full(n, 1.0 / max(rec.t[m - 1] - rec.t[0], 1e-9))])
 
             seen: dict[bytes, np.ndarray] = {}  # residuals by z: MINPACK asks for the Jacobian where it just evaluated them
