@@ -68,20 +68,15 @@ def smooth_derivatives(rec: Recording, window_s: float | None = None) -> tuple[n
 
 def motion_window(rec: Recording) -> float:
     """Savitzky–Golay window [s] for ``rec``'s derivatives: DERIVATIVE_WINDOW_S, shortened so that
-    its half-window is at most DERIVATIVE_HALF_WINDOW_RAD over the fastest joint's RMS angular
-    frequency sqrt(mean a² / mean v²) on its moving samples.  The frequency is estimated under the
-    default window, then once more under the window that gives (a long window underestimates a
-    fast motion's acceleration, and so its frequency)."""
-    window = DERIVATIVE_WINDOW_S
-    for _ in range(2):
-        _, v, a = smooth_derivatives(rec, window)
-        omega = 0.0
-        for k in range(v.shape[1]):
-            moving = np.abs(v[:, k]) > 0.05 * np.sqrt(np.mean(v[:, k] ** 2))
-            if moving.any():
-                omega = max(omega, float(np.sqrt(np.mean(a[moving, k] ** 2) / np.mean(v[moving, k] ** 2))))
-        window = min(DERIVATIVE_WINDOW_S, 2.0 * DERIVATIVE_HALF_WINDOW_RAD / omega) if omega > 0 else DERIVATIVE_WINDOW_S
-    return window
+    its half-window is at most DERIVATIVE_HALF_WINDOW_RAD over the fastest joint's angular
+    frequency RMS(v) / RMS(q − mean q) (a swing's ω; a slow push with a large offset reads low,
+    which keeps the default).  Velocities, not accelerations: a second derivative's noise would
+    read as a fast motion."""
+    q, v, _ = smooth_derivatives(rec)
+    spread = np.sqrt(np.mean((q - q.mean(axis=0)) ** 2, axis=0))
+    speed = np.sqrt(np.mean(v**2, axis=0))
+    omega = float(np.max(np.where(spread > 0, speed / np.maximum(spread, 1e-300), 0.0)))
+    return min(DERIVATIVE_WINDOW_S, 2.0 * DERIVATIVE_HALF_WINDOW_RAD / omega) if omega > 0 else DERIVATIVE_WINDOW_S
 
 
 def inverse_dynamics_residual(model: ArticulatedModel, rec: Recording, window_s: float | None = None,

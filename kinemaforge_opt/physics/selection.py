@@ -654,10 +654,12 @@ class EffectSearch:
     # --- checks of the selection ------------------------------------------------------------
 
     def drop_until_better(self, span: Recording, span_s: float | None, check: str, rms_key: str, doing: str,
-                          stage: str, first: HeldOut | None = None, required_gain: float = MIN_EFFECT_SIZE_SIGMA) -> None:
+                          stage: str, first: HeldOut | None = None, required_gain: float = MIN_EFFECT_SIZE_SIGMA,
+                          every_joint: bool = False) -> None:
         """Drop selected effects until the selection simulates ``span`` better than the nominal
-        model by ``required_gain`` noise sigmas or more (or none is left): backward elimination,
-        each step dropping the effect whose removal (the rest re-fitted) simulates ``span`` best.
+        model by ``required_gain`` noise sigmas or more (or none is left) on some joint (with
+        ``every_joint``, on every joint): backward elimination, each step dropping the effect
+        whose removal (the rest re-fitted) simulates ``span`` best.
         ``doing``: progress text, formatted with the number of effects ``n``; ``stage``: the key of
         ``dropped`` the dropped effects are listed under; ``first``: the current selection's
         prediction of ``span`` if already made."""
@@ -672,7 +674,7 @@ class EffectSearch:
             self.equivalents.clear()
             return
         while True:
-            gain = h.gain_sigma(self.sigma_q)
+            gain = float(np.min(h.joint_gains_sigma(self.sigma_q))) if every_joint else h.gain_sigma(self.sigma_q)
             self.tested.append({check: [f"{e} on {j}" for j, e, _ in self.selected], rms_key: [h.rms_before, h.rms_after],
                                 "gain_sigma": gain})
             # better by more than the noise: a smaller gain is no evidence the selection explains the motion
@@ -717,11 +719,11 @@ class EffectSearch:
             return False
         self.say("checking the effects against the held-out span")
         h = predict_before_after(self.nominal_model, self.model_of(self.current), held, self.segment_s)
-        if not h.scored or h.gain_sigma(self.sigma_q) >= -MIN_EFFECT_SIZE_SIGMA:
+        if not h.scored or np.min(h.joint_gains_sigma(self.sigma_q)) >= -MIN_EFFECT_SIZE_SIGMA:
             return False
         self.drop_until_better(held, self.segment_s, "held_out_check", "prediction_rms",
                                "checking {n} effect(s) on the held-out span", "held_out_check", first=h,
-                               required_gain=-MIN_EFFECT_SIZE_SIGMA)
+                               required_gain=-MIN_EFFECT_SIZE_SIGMA, every_joint=True)
         return True
 
     def acceptance_check(self, held: Recording | None) -> tuple[dict | None, bool]:

@@ -42,3 +42,4 @@ def test_block_means_average_whole_blocks():
     a = np.arange(14.0).reshape(7, 2)
     np.testing.assert_allclose(block_means(a, 3), [[2.0, 3.0], [8.0, 9.0]])
     assert block_means(a, 1) is a and block_means(None, 3) is None
+

@@ -10,7 +10,7 @@ import pytest
 from kinemaforge_opt.calibration import apply_parameters
 from kinemaforge_opt.io.recording import Recording
 from kinemaforge_opt.physics.diagnose import before_nominal_stops
-from kinemaforge_opt.physics.predict import predict_before_after, simulate_recording
+from kinemaforge_opt.physics.predict import HeldOut, predict_before_after, simulate_recording
 from kinemaforge_opt.synth.effects import ConcealedEffect as E
 from kinemaforge_opt.synth.groundtruth import HandPlan, simulate
 from kinemaforge_opt.synth.objects import make_object
@@ -75,3 +75,13 @@ def test_a_door_coasting_below_a_stop_it_never_reaches_keeps_its_speed(gap):
     m = apply_parameters(obj.model, {f"{j}.limit_stop": np.array([q_true[-1] + gap]),
                                      f"{j}.limit_stiffness": np.array([200.0])})
     np.testing.assert_allclose(simulate_recording(m, rec)[:, 0], q_true, atol=1e-5)
+
+def test_a_gain_on_one_joint_is_not_diluted_by_another():
+    """HeldOut's gain is the best joint's: one joint predicted 2σ better, one the same."""
+    t = np.arange(10.0)
+    rec = np.zeros((10, 2))
+    before = np.column_stack([np.full(10, 3.0), np.ones(10)])
+    after = np.column_stack([np.ones(10), np.ones(10)])
+    h = HeldOut(t, rec, before, after)
+    np.testing.assert_allclose(h.joint_gains_sigma(np.ones(2)), [2.0, 0.0])
+    assert h.gain_sigma(np.ones(2)) == pytest.approx(2.0)
