@@ -172,8 +172,9 @@ class Diagnosis:
         if self.held_out is not None and not self.held_out.scored:
             lines.append(f"held-out span: {unpredicted}")
         elif self.held_out is not None:
-            lines.append(("held-out span (used to check the effects: not independent)" if self.dropped.get("held_out_check")
-                          else "held-out") + f" prediction RMS: before {self.held_out.rms_before:.4g}, after "
+            span = "held-out span (used to check the effects: not independent)" if self.dropped.get("held_out_check") \
+                else "held-out"
+            lines.append(f"{span} prediction RMS: before {self.held_out.rms_before:.4g}, after "
                          f"{self.held_out.rms_after:.4g} (×{self.held_out.rms_before / max(self.held_out.rms_after, 1e-12):.1f} better)"
                          + ("" if (x := check.get("signal_sigma", {}).get("held_out")) is None or x >= THRESHOLD_SIGMA
                             else f"; the nominal model errs there by only {x:.1f} noise sigmas: the span shows no "

@@ -21,7 +21,7 @@ from ..model.pinocchio import inverse_dynamics
 THRESHOLD_SIGMA = 3.0  # a window is flagged when its running RMS exceeds this many noise sigmas
 # Savitzky–Golay window of the derivatives [s] ...
 DERIVATIVE_WINDOW_S = 0.15
-# ... at most this over the motion's RMS angular frequency ω (:func:`motion_window`): a cubic
+# ... at most this over the motion's angular frequency ω (:func:`motion_window`): a cubic
 # fit's acceleration of a sinusoid is low by ≈ 0.08 (ω h)² for a half-window h, so ω h ≤ 0.5 keeps
 # that bias under 2 % (a pendulum swinging at 2.5 Hz under a 0.15-s window: 9 %, larger than the
 # damping force the pre-screen looks for).

@@ -183,8 +183,9 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
 
     The initial state is the smoothed first state of the recording, or, with ``state_window_s``
     [s], the state that best reproduces (least squares) the model's motion over the first
-    ``state_window_s`` of the recording (or its first max(5, 2n + 1) samples, if more) — each model gets its own best starting state, as an
-    observer would give it; those samples are then fitted, not predicted, and come back as NaN.
+    ``state_window_s`` of the recording (or its first max(5, 2n + 1) samples, if more) — each
+    model gets its own best starting state, as an observer would give it; those samples are then
+    fitted, not predicted, and come back as NaN.
     (A state differentiated from a few noisy samples at the edge of a span can be so far off
     that it dominates the prediction error of every model alike.)"""
     from scipy.optimize import least_squares

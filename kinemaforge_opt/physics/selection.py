@@ -480,7 +480,8 @@ class EffectSearch:
             rounds += 1
             rss0 = self.rss(self.current)
             pending = [(j, e) for j in self.model.joint_names for e in self.candidates
-                       if not any(s[:2] == (j, e) for s in self.selected) and self.identifiable(self.chosen() + [(j, e)])]
+                       if not any(s[:2] == (j, e) for s in self.selected)
+                       and self.identifiable(self.chosen() + [(j, e)])]
             rows = self.fit_round(self.screened(pending, self.chosen(), strong_before))
             if not rows:
                 break
