@@ -1,4 +1,5 @@
-"""``diagnose`` on recordings made by another simulator than the synthetic world's MuJoCo: Drake's
+"""``diagnose`` (and ``calibrate``) on recordings made by another simulator than the synthetic
+world's MuJoCo: Drake's
 continuous MultibodyPlant, whose joint damping and RevoluteSpring / PrismaticSpring force
 elements are Drake's own (``verify.plant`` only declares them).  ``diagnose`` fits with the
 bridge's ABA (Pinocchio on CasADi), so neither the truth's equations nor its integrator are the
@@ -17,6 +18,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from kinemaforge_opt.calibration import calibrate
 from kinemaforge_opt.io.recording import Recording
 from kinemaforge_opt.model import ArticulatedModel, Inertial, Joint, JointDynamics, JointLimits, Link, read_urdf
 from kinemaforge_opt.model.pinocchio import build_pin_model
@@ -235,4 +237,22 @@ def test_an_effect_on_one_joint_of_two_is_judged_on_that_joint():
     d = diagnose(obj.model, rec, screen=None)
     assert {(e.joint, e.type): e.value for e in d.effects} == pytest.approx({(drawer.name, "viscous_damping"): 3.0},
                                                                            rel=0.05), d.summary()
+
+
+def test_calibrate_separates_inertia_and_damping_only_under_a_recorded_force():
+    """calibrate with the rod's inertia ratio and the hinge's damping free: under a recorded
+    torque both come out (1.5, 0.03); in a free swing the report names their combination as what
+    the recording cannot determine, and their ratio is still the truth's."""
+    free = ["hinge.damping", "rod.inertia_ratio"]
+    t = np.arange(0.0, 6.0 + 0.5 / RECORD_HZ, 1.0 / RECORD_HZ)
+    tau = (0.3 * np.sin(2 * np.pi * 0.7 * t) * (t < 3.0))[:, None]
+    forced = calibrate(_pendulum(0.01), _swing(_pendulum(0.03, scale=1.5), tau), free=free)
+    value = {n: float(e.value[0]) for n, e in forced.estimates.items()}
+    assert value == pytest.approx({"hinge.damping": 0.03, "rod.inertia_ratio": 1.5}, rel=0.01)
+    assert forced.identifiability == ()
+    swing = calibrate(_pendulum(0.01), _swing(_pendulum(0.03)), free=free)
+    (words,) = swing.identifiability
+    assert "cannot determine the combination" in words and "hinge.damping" in words and "rod.inertia_ratio" in words
+    ratio = float(swing.estimates["hinge.damping"].value[0]) / float(swing.estimates["rod.inertia_ratio"].value[0])
+    assert ratio == pytest.approx(0.03, rel=0.01)
 
