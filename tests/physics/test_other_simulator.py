@@ -1,13 +1,13 @@
 """``diagnose`` (and ``calibrate``) on recordings made by another simulator than the synthetic
-world's MuJoCo: Drake's
-continuous MultibodyPlant, whose joint damping and RevoluteSpring / PrismaticSpring force
-elements are Drake's own (``verify.plant`` only declares them).  ``diagnose`` fits with the
-bridge's ABA (Pinocchio on CasADi), so neither the truth's equations nor its integrator are the
-estimator's.  Coulomb friction is left out: Drake has no joint friction, and the verifier's
-applied friction force is this project's own law.
+world's MuJoCo: Drake's MultibodyPlant, whose joint damping, RevoluteSpring / PrismaticSpring
+force elements and joint limits are Drake's own (``verify.plant`` only declares them).  Both fit
+with the bridge's ABA (Pinocchio on CasADi), so neither the truth's equations nor its integrator
+are the estimator's.  Coulomb friction is left out: Drake has no joint friction, and the
+verifier's applied friction force is this project's own law.
 
 The hand is open loop here: sin² pushes that set the nominal joint's speed out, back and to rest
-(the true joint, damped or sprung, then moves otherwise), sampled at 30 Hz with encoder noise."""
+(the true joint, damped or sprung, then moves otherwise), sampled at 30 Hz with encoder noise
+unless a test says otherwise."""
 
 from __future__ import annotations
 
