@@ -135,10 +135,11 @@ class JointDynamics:
     Passive generalised force (see :mod:`kinemaforge_opt.physics.effects` for each term):
     -damping·v - coulomb·sign(v) - stribeck·exp(-(v/v_stribeck)²)·sign(v)
     - spring_stiffness·(q - spring_rest) + bias - drag·v·|v|
-    - limit_stiffness·max(limit_side·(q - limit_stop), 0)·limit_side;
+    - max(limit_side·(q - limit_stop), 0)·(limit_stiffness + limit_damping·limit_side·v)·limit_side;
     armature adds to the joint-space inertia diagonal (kg·m² or kg).  The last term is a stop
-    found by ``diagnose`` (limit contact): a one-sided spring beyond ``limit_stop`` [rad or m],
-    above the motion (``limit_side`` +1) or below it (-1); off while ``limit_stiffness`` is 0.
+    found by ``diagnose`` (limit contact): a one-sided spring, with a damper that grows with the
+    penetration (Hunt–Crossley), beyond ``limit_stop`` [rad or m], above the motion
+    (``limit_side`` +1) or below it (-1); off while ``limit_stiffness`` is 0.
     """
 
     damping: float = 0.0
@@ -152,6 +153,7 @@ class JointDynamics:
     drag: float = 0.0
     limit_stop: float = 0.0
     limit_stiffness: float = 0.0
+    limit_damping: float = 0.0
     limit_side: float = 1.0
 
     def __post_init__(self):

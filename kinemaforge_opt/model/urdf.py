@@ -36,7 +36,7 @@ ET.register_namespace("kinemaforge", KF_NS)
 _SUPPORTED = ("revolute", "continuous", "prismatic", "fixed")
 # JointDynamics fields that standard URDF cannot hold (damping and friction it can).
 _EXTENSION_DYNAMICS = ("spring_stiffness", "spring_rest", "armature", "stribeck", "v_stribeck", "bias", "drag",
-                       "limit_stop", "limit_stiffness", "limit_side")
+                       "limit_stop", "limit_stiffness", "limit_damping", "limit_side")
 
 
 def read_urdf(path: str | os.PathLike) -> ArticulatedModel:

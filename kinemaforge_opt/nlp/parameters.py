@@ -6,7 +6,7 @@ Two families share one naming scheme ``<joint or link>.<field>``:
   ``gravity``;
 - joint force parameters of the effect library (``physics.effects``): ``<joint>.damping``,
   ``.coulomb``, ``.stribeck``, ``.v_stribeck``, ``.spring_stiffness``, ``.spring_rest``, ``.bias``,
-  ``.drag``, ``.limit_stop``, ``.limit_stiffness``.
+  ``.drag``, ``.limit_stop``, ``.limit_stiffness``, ``.limit_damping``.
 
 The NLP optimises z = p / scale, with scales taken from the data (force and speed levels of the
 recording) so that IPOPT sees O(1) variables whatever the object's size.
@@ -22,9 +22,9 @@ from ..model.articulated import ArticulatedModel
 
 FORCE_PARAMS = (
     "damping", "coulomb", "stribeck", "v_stribeck", "spring_stiffness", "spring_rest",
-    "bias", "drag", "limit_stop", "limit_stiffness",
+    "bias", "drag", "limit_stop", "limit_stiffness", "limit_damping",
 )
-_NONNEGATIVE = {"damping", "coulomb", "stribeck", "spring_stiffness", "drag", "limit_stiffness"}
+_NONNEGATIVE = {"damping", "coulomb", "stribeck", "spring_stiffness", "drag", "limit_stiffness", "limit_damping"}
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,7 @@ def nominal_force_parameters(model: ArticulatedModel, joint: str) -> dict[str, f
     return {
         "damping": d.damping, "coulomb": d.coulomb, "stribeck": d.stribeck, "v_stribeck": d.v_stribeck,
         "spring_stiffness": d.spring_stiffness, "spring_rest": d.spring_rest, "bias": d.bias,
-        "drag": d.drag, "limit_stop": upper, "limit_stiffness": d.limit_stiffness,
+        "drag": d.drag, "limit_stop": upper, "limit_stiffness": d.limit_stiffness, "limit_damping": d.limit_damping,
     }
 
 
@@ -88,6 +88,7 @@ def make_block(model: ArticulatedModel, name: str, nominal: np.ndarray, scales: 
         scale = {
             "damping": F / v, "coulomb": F, "stribeck": F, "v_stribeck": v, "spring_stiffness": F / q,
             "spring_rest": q, "bias": F, "drag": F / v**2, "limit_stop": q, "limit_stiffness": F / (0.01 * q),
+            "limit_damping": F / (0.01 * q * v),
         }[field]
         scale = np.array([scale])
         if field in _NONNEGATIVE:

@@ -86,17 +86,19 @@ def _drag(q, v, d, eps=V_SMOOTH):
     return -d * v * _abs(v)
 
 
-def _limit_contact(q, v, stop, k, eps=V_SMOOTH, side=1.0):
-    # One-sided penalty spring beyond the stop; side = +1 for an upper stop, -1 for a lower one.
-    # The smooth ramp softplus(s·side·(q - stop)) / s approximates max(side·(q - stop), 0) with a
-    # 0.5 mrad (or 0.5 mm) rounding.
+def _limit_contact(q, v, stop, k, c=0.0, eps=V_SMOOTH, side=1.0):
+    # One-sided contact beyond the stop; side = +1 for an upper stop, -1 for a lower one.  Its
+    # force is ramp·(k + c·side·v) (Hunt–Crossley: a spring, and a damper that grows with the
+    # penetration, so the force starts at zero on contact; c = 0 is an elastic stop, a large c one
+    # that stops a part dead).  The smooth ramp softplus(s·side·(q - stop)) / s approximates
+    # max(side·(q - stop), 0) with a 0.5 mrad (or 0.5 mm) rounding.
     s = 2000.0
     x = s * side * (q - stop)
     if _is_symbolic(x):  # overflow-free softplus: max(x, 0) + log(1 + exp(-|x|))
         ramp = (ca.fmax(x, 0) + ca.log(1 + ca.exp(-ca.fabs(x)))) / s
     else:  # the same overflow-free form (numpy arrays, or Drake expressions: no logaddexp there)
         ramp = (0.5 * (x + np.abs(x)) + np.log(1 + np.exp(-np.abs(x)))) / s
-    return -side * k * ramp
+    return -side * ramp * (k + c * side * v)
 
 
 EFFECTS: dict[str, Effect] = {
@@ -117,7 +119,8 @@ EFFECTS: dict[str, Effect] = {
         ),
         Effect("constant_bias", ("bias",), ("N*m", "N"), (-np.inf,), _bias),
         Effect("quadratic_drag", ("drag",), ("N*m*s^2/rad^2", "N*s^2/m^2"), (0.0,), _drag),
-        Effect("limit_contact", ("limit_stop", "limit_stiffness"), ("rad", "m"), (-np.inf, 0.0), _limit_contact),
+        Effect("limit_contact", ("limit_stop", "limit_stiffness", "limit_damping"), ("rad", "m"), (-np.inf, 0.0, 0.0),
+               _limit_contact),
         Effect("axis_tilt", ("axis",), ("rad", "rad"), (), None, model_parameters=("axis",)),
         Effect("inertia_error", ("inertia_ratio",), ("1", "1"), (), None, model_parameters=("inertia",)),
     )

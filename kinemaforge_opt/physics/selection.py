@@ -361,10 +361,12 @@ class EffectSearch:
                 span = float(np.ptp(srch.q[:, k]))
                 # A stop is identifiable only if the recording both moves free of it and touches
                 # it: keep it inside the half of the recorded range on its side (else a "stop"
-                # beyond all the data is just a spring).
+                # beyond all the data is just a spring), give or take the noise (a rigid stop sits
+                # at the recorded extreme, which the noise puts on either side of it).
                 lo, hi = float(srch.q[:, k].min()), float(srch.q[:, k].max())
+                margin = 3.0 * float(self.sigma_s[k])
                 side, stop = self.stops[j]
-                bounds[f"{j}.limit_stop"] = (lo + 0.5 * span, hi) if side > 0 else (lo, hi - 0.5 * span)
+                bounds[f"{j}.limit_stop"] = (lo + 0.5 * span, hi + margin) if side > 0 else (lo - margin, hi - 0.5 * span)
                 if carried:
                     continue
                 init[f"{j}.limit_stop"] = np.array([stop - side * 0.05 * span])

@@ -88,6 +88,24 @@ def test_a_found_limit_stop_reflects_the_slider_like_a_spring():
     assert tr.t[inside][-1] - tr.t[inside][0] == pytest.approx(np.pi * np.sqrt(m / k), rel=0.05)
 
 
+def test_a_damped_stop_returns_the_slider_slower_as_hunt_crossley_says():
+    # with the contact damper the stop's force is x·(k + c·v) for a penetration x (Hunt–Crossley,
+    # linear): m v dv/(k + c v) = -x dx, and x goes 0 -> max -> 0, so the outgoing speed solves
+    # G(v_out) = G(v_in) with G(v) = v/c - (k/c²) ln(k + c v)
+    from scipy.optimize import brentq
+
+    m, k, c, stop, v0 = 2.0, 2000.0, 2000.0, 0.1, 0.5
+    model = slider(m, limit_stop=stop, limit_stiffness=k, limit_damping=c, limit_side=1.0)
+    tr = simulate(model, [0.0], [v0], 0.6, dt_out=1e-4, discrete=False)
+
+    def G(v):
+        return v / c - k / c**2 * np.log(k + c * v)
+
+    v_out = brentq(lambda v: G(v) - G(v0), -v0, -1e-9)
+    assert -0.9 * v0 < v_out < -0.5 * v0  # e ≈ 0.75: a real loss, not the elastic -v0
+    assert tr.v[-1, 0] == pytest.approx(v_out, rel=0.01)
+
+
 def test_start_just_past_a_limit_is_no_kick():
     # a measured q0 a noise-width (0.7 mrad) below a fitted lower limit, at rest, no force on a
     # horizontal slider: it must stay at rest (Drake's stiff limit constraint used to kick it)
