@@ -47,9 +47,9 @@ def _pushes(t: np.ndarray, inertia: float, span: float) -> np.ndarray:
     return tau
 
 
-def _drake_recording(category: str, record_hz: int = RECORD_HZ, **true_dynamics):
-    """The nominal one-joint object of ``category`` and a recording of it at ``record_hz`` with
-    ``true_dynamics`` (JointDynamics fields) simulated by Drake's continuous plant."""
+def _pushed(category: str, record_hz: int):
+    """The nominal one-joint object of ``category`` (its model and joint), its start 30 % into the
+    joint's range (1,) and the open-loop pushes (a Recording of q = 0 and tau, at ``record_hz``)."""
     obj = make_object(category, 0)
     (joint,) = obj.model.movable_joints
     lim = joint.limits
@@ -58,12 +58,17 @@ def _drake_recording(category: str, record_hz: int = RECORD_HZ, **true_dynamics)
     inertia = float(pin.crba(pm, pm.createData(), q0)[0, 0])
     t = np.arange(0.0, DURATION_S + 0.5 / record_hz, 1.0 / record_hz)
     tau = _pushes(t, inertia, lim.upper - lim.lower)[:, None]
-    names = obj.model.joint_names
-    forcing = Recording(t, names, np.zeros((len(t), 1)), tau=tau)
-    truth = obj.model.with_joint(joint.name, dynamics=JointDynamics(**true_dynamics))
-    motion = simulate_at(truth, q0, np.zeros(1), t, tau=forcing, discrete=False)
+    return obj.model, joint, q0, Recording(t, obj.model.joint_names, np.zeros((len(t), 1)), tau=tau)
+
+
+def _drake_recording(category: str, record_hz: int = RECORD_HZ, **true_dynamics):
+    """The nominal one-joint object of ``category`` and a recording of it at ``record_hz`` with
+    ``true_dynamics`` (JointDynamics fields) simulated by Drake's continuous plant."""
+    model, joint, q0, forcing = _pushed(category, record_hz)
+    truth = model.with_joint(joint.name, dynamics=JointDynamics(**true_dynamics))
+    motion = simulate_at(truth, q0, np.zeros(1), forcing.t, tau=forcing, discrete=False)
     q = motion.q + np.random.default_rng(0).normal(0.0, NOISE[category], motion.q.shape)
-    return obj.model, Recording(t, names, q, tau=tau)
+    return model, Recording(forcing.t, model.joint_names, q, tau=forcing.tau)
 
 
 @pytest.mark.parametrize("category", ["cabinet", "drawer"])
@@ -197,20 +202,13 @@ def _rigid_stop_recording(category: str, stop: float):
     """The nominal one-joint object of ``category`` and a 100-Hz recording of it pushed against a
     stop at ``stop`` [rad or m] that Drake's discrete plant enforces as a joint limit: a rigid,
     inelastic contact (the model declares its limit farther out)."""
-    obj = make_object(category, 0)
-    (joint,) = obj.model.movable_joints
+    model, joint, q0, forcing = _pushed(category, 100)
     lim = joint.limits
-    q0 = np.array([lim.lower + 0.3 * (lim.upper - lim.lower)])
-    pm = build_pin_model(obj.model)
-    inertia = float(pin.crba(pm, pm.createData(), q0)[0, 0])
-    t = np.arange(0.0, DURATION_S + 0.005, 0.01)
-    tau = _pushes(t, inertia, lim.upper - lim.lower)[:, None]
-    truth = obj.model.with_joint(joint.name, limits=JointLimits(lim.lower, stop, lim.effort, lim.velocity))
-    forcing = Recording(t, obj.model.joint_names, np.zeros((len(t), 1)), tau=tau)
-    motion = simulate_at(truth, q0, np.zeros(1), t, tau=forcing, discrete=True)
+    truth = model.with_joint(joint.name, limits=JointLimits(lim.lower, stop, lim.effort, lim.velocity))
+    motion = simulate_at(truth, q0, np.zeros(1), forcing.t, tau=forcing, discrete=True)
     assert motion.q.max() == pytest.approx(stop, abs=1e-3)  # it did reach the stop
     noise = np.random.default_rng(0).normal(0.0, NOISE[category], motion.q.shape)
-    return obj.model, Recording(t, obj.model.joint_names, motion.q + noise, tau=tau)
+    return model, Recording(forcing.t, model.joint_names, motion.q + noise, tau=forcing.tau)
 
 
 def test_a_rigid_door_stop_is_found_where_it_is():
