@@ -28,7 +28,8 @@ _UNITS = {
     "damping": ("N*m*s/rad", "N*s/m"), "coulomb": ("N*m", "N"), "stribeck": ("N*m", "N"),
     "v_stribeck": ("rad/s", "m/s"), "spring_stiffness": ("N*m/rad", "N/m"), "spring_rest": ("rad", "m"),
     "bias": ("N*m", "N"), "drag": ("N*m*s^2/rad^2", "N*s^2/m^2"), "limit_stop": ("rad", "m"),
-    "limit_stiffness": ("N*m/rad", "N/m"), "limit_damping": ("N*m*s/rad^2", "N*s/m^2"), "axis": ("1", "1"), "origin": ("m", "m"), "pitch": ("m/rad", "m/rad"),
+    "limit_stiffness": ("N*m/rad", "N/m"), "limit_damping": ("N*m*s/rad^2", "N*s/m^2"),
+    "axis": ("1", "1"), "origin": ("m", "m"), "pitch": ("m/rad", "m/rad"),
     "armature": ("kg*m^2", "kg"), "inertia_ratio": ("1", "1"), "inertia": ("kg, kg*m, kg*m^2", "kg, kg*m, kg*m^2"), "gravity": ("m/s^2", "m/s^2"),
 }
 

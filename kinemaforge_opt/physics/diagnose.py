@@ -38,11 +38,11 @@
    ``PREDICTION_TRIES`` of them, strongest first, be judged by that first other recording
    instead: the first that predicts it better by more than the noise is accepted (an effect the
    system has shows in every recording of it; polishing one recording's model-form error does
-   not carry over to another).  Whatever the fit span said, a selection that predicts the held-out span worse than the
-   nominal model by more than a noise sigma is contradicted by data outside the fit (a friction
-   invented to hold a door against a stiff stop halts it where it coasts on): effects are dropped
-   as in the simulation check until it predicts the span no worse, which then is not independent
-   (the summary says so);
+   not carry over to another).  Whatever the fit span said, a selection that predicts the
+   held-out span worse than the nominal model by more than a noise sigma is contradicted by data
+   outside the fit (a friction invented to hold a door against a stiff stop halts it where it
+   coasts on): effects are dropped as in the simulation check until it predicts the span no
+   worse, which then is not independent (the summary says so);
 3. re-fits the nominal model and the model with every selected effect at the full rate (started
    from their search-grid solutions; 95 % intervals from the fit's sensitivity), drops an effect
    the model lacked whose interval holds its "off" value, and writes the augmented model;
@@ -98,8 +98,8 @@ class Diagnosis:
     # prediction RMS / noise}}``; None when no such check was needed.
     acceptance_check: dict | None = None
     # Effects the search selected and a later check dropped: {check: ["<type> on <joint>", ...]},
-    # check one of "simulation_check", "acceptance_check", "held_out_check", "interval_check" (with "_unscored" appended
-    # when no piece of its span was long enough to simulate).
+    # check one of "simulation_check", "acceptance_check", "held_out_check", "interval_check" (with
+    # "_unscored" appended when no piece of its span was long enough to simulate).
     dropped: dict = field(default_factory=dict)
     segment_s: float | None = None  # the fit's segment length [s] (None: one trajectory)
 
@@ -289,7 +289,7 @@ def diagnose(
     say("fitting the nominal model" if k_dec == 1 else
         f"fitting the nominal model ({1 / srch.dt:.0f} Hz search grid, {k_dec}-sample block means)")
     search = EffectSearch(model, srch, sigma_q, sigma_s, sigma_signal, friction_smoothing(srch), candidates,
-                           segment_s, screen, other_recordings, say, workers, fit_rec=fit_rec)
+                           segment_s, screen, other_recordings, say, fit_rec, workers)
     search.select(max_effects)
     search.simulation_check()
     acceptance, judged_by_held_out = search.acceptance_check(held)

@@ -255,12 +255,12 @@ class EffectSearch:
     must pass to show signal; eps (n,): the smooth-sign width [rad/s or m/s].  workers: processes
     for a round's independent hypothesis fits (None: :func:`~kinemaforge_opt.parallel.workers`).
     fit_rec: the full-rate fit span whose block means ``srch`` is (the pre-screen's derivatives
-    come from it; default ``srch``)."""
+    come from it)."""
 
     def __init__(self, model: ArticulatedModel, srch: Recording, sigma_q: np.ndarray, sigma_s: np.ndarray,
                  sigma_signal: np.ndarray, eps: np.ndarray, candidates: tuple[str, ...], segment_s: float | None,
-                 screen: int | None, other_recordings: tuple[Recording, ...], say, workers: int | None = None,
-                 fit_rec: Recording | None = None):
+                 screen: int | None, other_recordings: tuple[Recording, ...], say, fit_rec: Recording,
+                 workers: int | None = None):
         self.model, self.srch = model, srch
         self.workers = workers
         self.sigma_q, self.sigma_s, self.sigma_signal, self.eps = sigma_q, sigma_s, sigma_signal, eps
@@ -283,9 +283,8 @@ class EffectSearch:
         # long window, comes out low, and the pre-screen's inertia column "explains" that error),
         # then block means (full-rate accelerations alone are mostly differentiated noise, which
         # the inertia column would "explain" too)
-        full = srch if fit_rec is None else fit_rec
-        block = max(1, int(round(srch.dt / full.dt)))
-        self.r_nom, self.q_s, self.v_s, a_s = inverse_dynamics_residual(model, full, motion_window(full), block)
+        block = max(1, int(round(srch.dt / fit_rec.dt)))
+        self.r_nom, self.q_s, self.v_s, a_s = inverse_dynamics_residual(model, fit_rec, motion_window(fit_rec), block)
         self.id_force = inverse_dynamics(model, self.q_s, self.v_s, a_s)
         self.nominal_model = _model_of(model, self.nominal_trial, self.stops)
         self.n_res = srch.q.size
@@ -366,7 +365,8 @@ class EffectSearch:
                 lo, hi = float(srch.q[:, k].min()), float(srch.q[:, k].max())
                 margin = 3.0 * float(self.sigma_s[k])
                 side, stop = self.stops[j]
-                bounds[f"{j}.limit_stop"] = (lo + 0.5 * span, hi + margin) if side > 0 else (lo - margin, hi - 0.5 * span)
+                bounds[f"{j}.limit_stop"] = (lo + 0.5 * span, hi + margin) if side > 0 \
+                    else (lo - margin, hi - 0.5 * span)
                 if carried:
                     continue
                 init[f"{j}.limit_stop"] = np.array([stop - side * 0.05 * span])
