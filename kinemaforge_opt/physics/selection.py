@@ -832,8 +832,8 @@ class EffectSearch:
 
     def found_effects(self, final: Calibration) -> list[FoundEffect]:
         """The selected effects as reported: value, unit, 95 % interval, ΔBIC and extra params
-        (spring rest, stop stiffness, Stribeck speed, tilted axis, equivalent explanations, and
-        the model's old value when it had the effect)."""
+        (spring rest, stop stiffness and contact damper, Stribeck speed, tilted axis, equivalent
+        explanations, and the model's old value when it had the effect)."""
         model, found = self.model, []
         for joint, effect, d in self.selected:
             names = effect_parameters(model, joint, effect)
@@ -843,6 +843,7 @@ class EffectSearch:
                 params["rest"] = float(final.estimates[names[1]].value[0])
             if effect == "limit_contact":
                 params["stiffness"] = float(final.estimates[names[1]].value[0])
+                params["damping"] = float(final.estimates[names[2]].value[0])
             if effect == "stribeck_friction":
                 params["v_stribeck"] = float(final.estimates[names[1]].value[0])
             alts = self.equivalents.get((joint, effect), [])

@@ -221,6 +221,7 @@ def test_a_rigid_door_stop_is_found_where_it_is():
     found = {e.type: e for e in d.effects}
     assert set(found) == {"limit_contact"}, d.summary()
     assert found["limit_contact"].value == pytest.approx(1.0, abs=0.01)
+    assert found["limit_contact"].params["damping"] > 0  # a stop that stops the door dead is damped
     assert d.held_out.rms_after <= d.held_out.rms_before + NOISE["cabinet"]
 
 
