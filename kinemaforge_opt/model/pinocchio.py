@@ -81,3 +81,31 @@ def joint_space_inertia(model: ArticulatedModel, q: np.ndarray) -> np.ndarray:
     pm = build_pin_model(model)
     M = pin.crba(pm, pm.createData(), np.asarray(q, dtype=float))
     return np.triu(M) + np.triu(M, 1).T
+
+
+def forward_dynamics(model: ArticulatedModel, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """Rigid-body forward dynamics (Pinocchio's ABA, armature included) along the states ``q``,
+    ``v`` (T, n) under the joint forces ``tau`` (T, n) [N·m or N] -> accelerations (T, n)
+    [rad/s² or m/s²]; joint friction, damping and springs belong in ``tau``."""
+    pm = build_pin_model(model)
+    data = pm.createData()
+    return np.array([pin.aba(pm, data, qq, vv, tt) for qq, vv, tt in zip(q, v, tau)])
+
+
+def link_inverse_dynamics(model: ArticulatedModel, link: str, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """(T, n) the share of M(q) a + h(q, v) [N·m or N] that the inertia of ``link`` alone (its
+    mass, centre of mass and rotational inertia, gravity included) takes along the states ``q``,
+    ``v``, ``a`` (T, n): Pinocchio's joint-torque regressor times that link's inertial parameters
+    in the frame of the joint it rides on.  Zero for a link without inertia or fixed to the world."""
+    inertial = model.link(link).inertial
+    pm = build_pin_model(model)
+    frame = pm.frames[pm.getFrameId(link)]
+    if inertial is None or frame.parentJoint == 0:
+        return np.zeros_like(np.asarray(q, dtype=float))
+    data = pm.createData()
+    Y = pin.Inertia(inertial.mass, np.asarray(inertial.com), np.asarray(inertial.inertia))
+    theta = frame.placement.act(Y).toDynamicParameters()
+    cols = slice(10 * (frame.parentJoint - 1), 10 * frame.parentJoint)
+    # (the binding returns a 1-D array for a one-joint model, hence the reshape)
+    return np.array([np.reshape(pin.computeJointTorqueRegressor(pm, data, qq, vv, aa), (pm.nv, -1))[:, cols] @ theta
+                     for qq, vv, aa in zip(q, v, a)])

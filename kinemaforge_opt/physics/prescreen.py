@@ -9,6 +9,7 @@ import numpy as np
 
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
+from ..model.pinocchio import forward_dynamics, inverse_dynamics, link_inverse_dynamics
 from .effects import EFFECTS
 from .locate import inverse_dynamics_residual
 from .search import Trial
@@ -27,6 +28,30 @@ def limit_stop_guess(model: ArticulatedModel, rec: Recording) -> dict[str, tuple
         down = float(np.mean(force[rec.q[:, k] <= lo + band, k]))
         out[j] = (1.0, hi) if up >= down else (-1.0, lo)
     return out
+
+
+def inertia_columns(model: ArticulatedModel, q: np.ndarray, v: np.ndarray, a: np.ndarray,
+                    tau: np.ndarray | None) -> np.ndarray:
+    """(T, n) per joint, the pre-screen's column of an inertia error on it: the force its moved
+    link's inertia takes along (q, v) (T, n), at the accelerations the model predicts under the
+    recorded joint forces ``tau`` (T, n) and its own passive forces.  Without a recorded force
+    (``tau`` None or zero): the whole rigid-body force M a + h at the measured accelerations ``a``.
+
+    Why predicted accelerations: the residual force M a + h - tau is made of the measured ones,
+    so a column made of them carries the very differentiation noise the residual carries and
+    "explains" it (errors in variables: on a 1-mm drawer recorded at 100 Hz, 87 % of a residual
+    that was mostly noise, ranked above the stop that made the rest).  To first order in the
+    error the true acceleration is the predicted one, so this column has the noise of q and v
+    only.  Why not without a force: the column then holds only the passive forces' share, and a
+    single link's inertia scale is not identifiable at all (:mod:`.diagnose`); on the real Qube's
+    free swings it reordered the later rounds and lost the arm's Coulomb friction (held-out
+    0.030 / 0.028 -> 0.041 / 0.037 rad)."""
+    if tau is None or not np.any(tau != 0.0):
+        return inverse_dynamics(model, q, v, a)
+    passive = np.stack([j.dynamics.passive_force(q[:, k], v[:, k]) for k, j in enumerate(model.movable_joints)], axis=1)
+    a_pred = forward_dynamics(model, q, v, tau + passive)
+    return np.stack([link_inverse_dynamics(model, j.child, q, v, a_pred)[:, k] for k, j in enumerate(model.movable_joints)],
+                    axis=1)
 
 
 def stribeck_speeds(v: np.ndarray, eps: float, n: int = 12) -> np.ndarray:

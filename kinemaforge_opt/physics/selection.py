@@ -12,12 +12,12 @@ import numpy as np
 from ..calibration import Calibration
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
-from ..model.pinocchio import build_pin_model, inverse_dynamics
+from ..model.pinocchio import build_pin_model, joint_space_inertia
 from ..nlp.joint_space import build_joint_space_fit, match_recording, velocity_estimate
 from ..parallel import process_map
-from .locate import THRESHOLD_SIGMA, inverse_dynamics_residual, motion_window
+from .locate import THRESHOLD_SIGMA, block_means, inverse_dynamics_residual, motion_window
 from .predict import HeldOut, predict_before_after, prediction_signal
-from .prescreen import limit_stop_guess, linear_init, screen_scores
+from .prescreen import inertia_columns, limit_stop_guess, linear_init, screen_scores
 from .search import CPU_CAP_STATUS, HypothesisFit, Trial, effect_parameters
 
 DELTA_BIC = -10.0
@@ -285,7 +285,7 @@ class EffectSearch:
         # the inertia column would "explain" too)
         block = max(1, int(round(srch.dt / fit_rec.dt)))
         self.r_nom, self.q_s, self.v_s, a_s = inverse_dynamics_residual(model, fit_rec, motion_window(fit_rec), block)
-        self.id_force = inverse_dynamics(model, self.q_s, self.v_s, a_s)
+        self.id_force = inertia_columns(model, self.q_s, self.v_s, a_s, block_means(fit_rec.tau, block))
         self.nominal_model = _model_of(model, self.nominal_trial, self.stops)
         self.n_res = srch.q.size
         # The prediction gate's judge (``prediction_gate``): the first other recording whose
@@ -367,6 +367,7 @@ class EffectSearch:
                 side, stop = self.stops[j]
                 bounds[f"{j}.limit_stop"] = (lo + 0.5 * span, hi + margin) if side > 0 \
                     else (lo - margin, hi - 0.5 * span)
+                bounds.update(self.rigid_bounds(j))
                 if carried:
                     continue
                 init[f"{j}.limit_stop"] = np.array([stop - side * 0.05 * span])
@@ -391,6 +392,22 @@ class EffectSearch:
                 # a hypothesis that used up its CPU budget gets no second one
                 return trial
         return hf.solve(names, start=start, init=init, states_from_data=from_data, bounds=bounds)
+
+    def rigid_bounds(self, joint: str) -> dict[str, tuple[float, float]]:
+        """Upper bounds of a stop's stiffness and contact damper on ``joint``: those that stop the
+        fastest recorded motion (speed v, what the joint moves M at the recorded extreme on the
+        stop's side) within one noise sigma s of penetration, k = M v² / s² (its kinetic energy
+        stored) and c = 2 M v / s² (dissipated by the damper alone).  A stiffer stop cannot be told
+        from a rigid one by these data, and without a bound the fit of a rigid stop (Drake's joint
+        limit) ran both to infinity and to its iteration cap, or held the part off the tail of
+        its contact's rounded corner 3 mm before the stop."""
+        k = self.model.joint_index(joint)
+        side, _ = self.stops[joint]
+        at = self.srch.q[np.argmax(side * self.srch.q[:, k])]
+        M = float(joint_space_inertia(self.model, at)[k, k])
+        v = float(np.max(np.abs(self.v_s[:, k])))
+        s = float(self.sigma_s[k])
+        return {f"{joint}.limit_stiffness": (0.0, M * v**2 / s**2), f"{joint}.limit_damping": (0.0, 2.0 * M * v / s**2)}
 
     def trials(self, hypotheses: list[list[tuple[str, str]]], start: Trial) -> list[Trial]:
         """:meth:`trial_of` of each of ``hypotheses`` from ``start``, in forked processes on up to
