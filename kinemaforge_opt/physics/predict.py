@@ -54,19 +54,38 @@ class HeldOut:
     def rms_after(self) -> float:
         return float(np.sqrt(np.mean((self.q_after - self.q_rec) ** 2))) if self.scored else float("nan")
 
-    def joint_gains_sigma(self, sigma_q: np.ndarray) -> np.ndarray:
+    def joint_gains_sigma(self, sigma_q: np.ndarray, signal_sigma: float | None = None) -> np.ndarray:
         """(n,) how much better the after-model predicts each joint, in noise sigmas: the drop of
-        the joint's RMS error normalised by its ``sigma_q`` (n,)."""
+        the joint's RMS error normalised by its ``sigma_q`` (n,).  signal_sigma: if given, each
+        joint's RMS is taken only where either model's error, as a running RMS over
+        SIGNAL_WINDOW_S, reaches that many noise sigmas (where both predict to the noise the span
+        cannot tell the models apart, and pooling it dilutes the gain: a door stopped dead by a
+        rigid stop on its way shut is mispredicted for a fraction of a second); 0 for a joint
+        with no such sample."""
         s = np.maximum(np.asarray(sigma_q, float), 1e-12)
-        rms = [np.sqrt(np.mean(((q - self.q_rec) / s) ** 2, axis=0)) for q in (self.q_before, self.q_after)]
-        return rms[0] - rms[1]
+        e_b, e_a = ((q - self.q_rec) / s for q in (self.q_before, self.q_after))
+        if signal_sigma is None:
+            return np.sqrt(np.mean(e_b**2, axis=0)) - np.sqrt(np.mean(e_a**2, axis=0))
+        w = max(1, int(round(SIGNAL_WINDOW_S / max(float(np.median(np.diff(self.t))), 1e-12)))) if self.t.size > 1 else 1
+        kernel = np.ones(w) / w
+        gains = np.zeros(e_b.shape[1])
+        for k in range(e_b.shape[1]):
+            running = [np.sqrt(np.convolve(e[:, k] ** 2, kernel, mode="same")) for e in (e_b, e_a)]
+            m = np.maximum(*running) >= signal_sigma
+            if m.any():
+                gains[k] = np.sqrt(np.mean(e_b[m, k] ** 2)) - np.sqrt(np.mean(e_a[m, k] ** 2))
+        return gains
 
-    def gain_sigma(self, sigma_q: np.ndarray) -> float:
+    def gain_sigma(self, sigma_q: np.ndarray, signal_sigma: float | None = None) -> float:
         """How much better the after-model predicts, in noise sigmas: the largest of
         :meth:`joint_gains_sigma` — an effect on one joint of several shows on that joint (pooled
         over joints, a well-predicted door diluted the gain of the drawer beside it below a
         sigma)."""
-        return float(np.max(self.joint_gains_sigma(sigma_q)))
+        return float(np.max(self.joint_gains_sigma(sigma_q, signal_sigma)))
+
+
+SIGNAL_WINDOW_S = 0.25
+"""Window of the running RMS error that :meth:`HeldOut.joint_gains_sigma` judges signal by [s]."""
 
 
 def prediction_signal(h: HeldOut, sigma_q: np.ndarray) -> float:

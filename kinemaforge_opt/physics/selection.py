@@ -695,14 +695,15 @@ class EffectSearch:
 
     def drop_until_better(self, span: Recording, span_s: float | None, check: str, rms_key: str, doing: str,
                           stage: str, first: HeldOut | None = None, required_gain: float = MIN_EFFECT_SIZE_SIGMA,
-                          every_joint: bool = False) -> None:
+                          every_joint: bool = False, signal_sigma: float | None = None) -> None:
         """Drop selected effects until the selection simulates ``span`` better than the nominal
         model by ``required_gain`` noise sigmas or more (or none is left) on some joint (with
         ``every_joint``, on every joint): backward elimination, each step dropping the effect
         whose removal (the rest re-fitted) simulates ``span`` best.
         ``doing``: progress text, formatted with the number of effects ``n``; ``stage``: the key of
         ``dropped`` the dropped effects are listed under; ``first``: the current selection's
-        prediction of ``span`` if already made."""
+        prediction of ``span`` if already made; ``signal_sigma``: judge the gain only where a model
+        errs by that many noise sigmas (:meth:`~.predict.HeldOut.joint_gains_sigma`)."""
         keys = self.chosen()
         self.say(doing.format(n=len(self.selected)))
         h = first or predict_before_after(self.nominal_model, self.model_of(self.current), span, span_s)
@@ -714,7 +715,8 @@ class EffectSearch:
             self.equivalents.clear()
             return
         while True:
-            gain = float(np.min(h.joint_gains_sigma(self.sigma_q))) if every_joint else h.gain_sigma(self.sigma_q)
+            gains = h.joint_gains_sigma(self.sigma_q, signal_sigma)
+            gain = float(np.min(gains) if every_joint else np.max(gains))
             self.tested.append({check: [f"{e} on {j}" for j, e, _ in self.selected], rms_key: [h.rms_before, h.rms_after],
                                 "gain_sigma": gain})
             # better by more than the noise: a smaller gain is no evidence the selection explains the motion
@@ -746,7 +748,8 @@ class EffectSearch:
         it does not, effects are dropped (:meth:`drop_until_better`).  A limit contact is judged
         like every other effect: the model holds its stop."""
         self.drop_until_better(self.srch, self.segment_s or SIMULATION_CHECK_S, "simulation_check",
-                               "fit_span_simulated_rms", "simulating the fit span with {n} effect(s)", "simulation_check")
+                               "fit_span_simulated_rms", "simulating the fit span with {n} effect(s)", "simulation_check",
+                               signal_sigma=THRESHOLD_SIGMA)
 
     def held_out_check(self, held: Recording | None) -> bool:
         """Whether the held-out span ``held`` judged the selection.  A selection that predicts it

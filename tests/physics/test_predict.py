@@ -85,3 +85,17 @@ def test_a_gain_on_one_joint_is_not_diluted_by_another():
     h = HeldOut(t, rec, before, after)
     np.testing.assert_allclose(h.joint_gains_sigma(np.ones(2)), [2.0, 0.0])
     assert h.gain_sigma(np.ones(2)) == pytest.approx(2.0)
+
+
+def test_a_short_misprediction_is_judged_where_it_is():
+    """Before-model off by 10 noise sigmas for 0.2 s of a 10-s span (a stop's impact), after-model
+    at the noise: pooled over the span the gain is below one sigma, judged where either model
+    errs beyond 3 sigmas it is several."""
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 10.0, 0.01)
+    q_rec = rng.normal(0.0, 1.0, (t.size, 1))
+    bump = ((t > 5.0) & (t < 5.2)).astype(float)[:, None] * 10.0
+    h = HeldOut(t, q_rec, bump, np.zeros_like(q_rec))
+    assert h.gain_sigma(np.ones(1)) < 1.0
+    assert h.gain_sigma(np.ones(1), signal_sigma=3.0) > 3.0
+    assert HeldOut(t, q_rec, np.zeros_like(q_rec), np.zeros_like(q_rec)).gain_sigma(np.ones(1), signal_sigma=3.0) == 0.0
