@@ -110,12 +110,14 @@ def quantisation_sigma(q: np.ndarray) -> np.ndarray:
 
 
 def simulate_segments(model: ArticulatedModel, rec: Recording, segment_s: float | None,
-                      extra: dict | None = None) -> np.ndarray:
+                      extra: dict | None = None, offset_s: float = 0.0) -> np.ndarray:
     """q (T, n) of ``model`` (plus ``extra`` force laws, see :func:`simulate_recording`) on ``rec``,
     segment by segment when ``segment_s`` [s] is given, each from its own best state over the
     first ``STATE_WINDOW_S`` of a segment; NaN over those fitted samples and over a segment too
-    short to estimate a starting state."""
-    edges = [rec.t[0]] if not segment_s else list(np.arange(rec.t[0], rec.t[-1], segment_s))
+    short to estimate a starting state.  offset_s: the segments start this far [s] into the
+    recording (its first ``offset_s`` a segment of its own)."""
+    edges = [rec.t[0]] if not segment_s else \
+        sorted({rec.t[0], *np.arange(rec.t[0] + offset_s, rec.t[-1], segment_s)})
     edges.append(rec.t[-1] + 1e-9)
     parts = []
     for a, b in zip(edges[:-1], edges[1:]):
@@ -128,13 +130,22 @@ def simulate_segments(model: ArticulatedModel, rec: Recording, segment_s: float 
     return np.vstack(parts)
 
 
-def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec: Recording, segment_s: float | None) -> HeldOut:
+def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec: Recording, segment_s: float | None,
+                         phases: int = 1) -> HeldOut:
     """Simulated q of both models on ``rec`` (:func:`simulate_segments`), scored where both are
-    predictions."""
-    q_b = simulate_segments(before, rec, segment_s)
-    q_a = q_b if after is before else simulate_segments(after, rec, segment_s)
-    ok = ~(np.isnan(q_b).any(axis=1) | np.isnan(q_a).any(axis=1))
-    return HeldOut(rec.t[ok], rec.q[ok], q_b[ok], q_a[ok])
+    predictions.  phases: with segments, the span is predicted this many times with the segments
+    shifted by segment_s / phases, and the predictions pooled (each sample once per phase): an
+    event at a segment's start, where the segment's state is fitted and nothing is predicted,
+    is then predicted in another phase (a drawer stopped dead 0.05 s before a segment's edge
+    went unseen)."""
+    parts = []
+    for k in range(phases if segment_s else 1):
+        offset = k * segment_s / phases if segment_s else 0.0
+        q_b = simulate_segments(before, rec, segment_s, offset_s=offset)
+        q_a = q_b if after is before else simulate_segments(after, rec, segment_s, offset_s=offset)
+        ok = ~(np.isnan(q_b).any(axis=1) | np.isnan(q_a).any(axis=1))
+        parts.append((rec.t[ok], rec.q[ok], q_b[ok], q_a[ok]))
+    return HeldOut(*(np.concatenate(x) for x in zip(*parts)))
 
 
 def _dynamics_dae(model: ArticulatedModel, extra: dict | None) -> dict:

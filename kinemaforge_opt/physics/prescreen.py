@@ -10,6 +10,7 @@ import numpy as np
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..model.pinocchio import forward_dynamics, inverse_dynamics, link_inverse_dynamics
+from ..nlp.joint_space import noise_std
 from .effects import EFFECTS
 from .locate import inverse_dynamics_residual
 from .search import Trial
@@ -18,15 +19,28 @@ from .search import Trial
 def limit_stop_guess(model: ArticulatedModel, rec: Recording) -> dict[str, tuple[float, float]]:
     """Per joint, the side (+1 above the motion, -1 below) and initial position of a hypothetical
     stop: the recorded extreme at which the nominal inverse-dynamics residual force pushes back
-    hardest (a stop is where the motion turns with a force the model lacks)."""
+    with the larger impulse (a stop is where the motion turns with a force the model lacks; a
+    mean over the extreme's samples let one noisy sample outweigh an impact).  Only samples after
+    the motion first leaves an extreme's band count for it: a recording that starts at rest at
+    one end of its motion has not met a stop there (a drawer driven shut from its start onto a
+    stop: the start's residual, differentiation noise at the edge, chose the start's end)."""
     force, q, _, _ = inverse_dynamics_residual(model, rec)
+    sigma = noise_std(rec.q)
     out = {}
     for k, j in enumerate(model.joint_names):
-        lo, hi = float(rec.q[:, k].min()), float(rec.q[:, k].max())
+        qk = rec.q[:, k]
+        lo, hi = float(qk.min()), float(qk.max())
         band = 0.03 * max(hi - lo, 1e-12)
-        up = -float(np.mean(force[rec.q[:, k] >= hi - band, k]))
-        down = float(np.mean(force[rec.q[:, k] <= lo + band, k]))
-        out[j] = (1.0, hi) if up >= down else (-1.0, lo)
+        away = max(2.0 * band, 5.0 * float(sigma[k]))  # left the band: beyond the noise's reach
+        push = {}
+        for side, near, far in ((1.0, qk >= hi - band, qk < hi - away), (-1.0, qk <= lo + band, qk > lo + away)):
+            left = np.flatnonzero(far)
+            arrived = near & (np.arange(qk.size) > left[0]) if left.size else near
+            push[side] = -side * float(np.sum(force[arrived, k])) if arrived.any() else -np.inf
+        if not np.isfinite(max(push.values())):  # the motion never left either band
+            push = {side: -side * float(np.sum(force[near, k]))
+                    for side, near in ((1.0, qk >= hi - band), (-1.0, qk <= lo + band))}
+        out[j] = (1.0, hi) if push[1.0] >= push[-1.0] else (-1.0, lo)
     return out
 
 

@@ -695,7 +695,7 @@ class EffectSearch:
 
     def drop_until_better(self, span: Recording, span_s: float | None, check: str, rms_key: str, doing: str,
                           stage: str, first: HeldOut | None = None, required_gain: float = MIN_EFFECT_SIZE_SIGMA,
-                          every_joint: bool = False, signal_sigma: float | None = None) -> None:
+                          every_joint: bool = False, signal_sigma: float | None = None, phases: int = 1) -> None:
         """Drop selected effects until the selection simulates ``span`` better than the nominal
         model by ``required_gain`` noise sigmas or more (or none is left) on some joint (with
         ``every_joint``, on every joint): backward elimination, each step dropping the effect
@@ -703,10 +703,11 @@ class EffectSearch:
         ``doing``: progress text, formatted with the number of effects ``n``; ``stage``: the key of
         ``dropped`` the dropped effects are listed under; ``first``: the current selection's
         prediction of ``span`` if already made; ``signal_sigma``: judge the gain only where a model
-        errs by that many noise sigmas (:meth:`~.predict.HeldOut.joint_gains_sigma`)."""
+        errs by that many noise sigmas (:meth:`~.predict.HeldOut.joint_gains_sigma`); ``phases``: of
+        the pieces (:func:`~.predict.predict_before_after`)."""
         keys = self.chosen()
         self.say(doing.format(n=len(self.selected)))
-        h = first or predict_before_after(self.nominal_model, self.model_of(self.current), span, span_s)
+        h = first or predict_before_after(self.nominal_model, self.model_of(self.current), span, span_s, phases)
         if keys and not h.scored:  # no piece long enough to simulate: nothing verifies the selection
             self.tested.append({check: [f"{e} on {j}" for j, e, _ in self.selected], "unscored": True})
             self.dropped.setdefault(f"{stage}_unscored", []).extend(f"{e} on {j}" for j, e, _ in self.selected)
@@ -728,7 +729,7 @@ class EffectSearch:
                 trial = self.trial_of(rest, self.nominal_trial) if rest else self.nominal_trial
                 self.say(f"simulating the fit span without {key[1]} on {key[0]}")
                 after = self.model_of(trial) if rest else self.nominal_model
-                options.append((predict_before_after(self.nominal_model, after, span, span_s), key, trial))
+                options.append((predict_before_after(self.nominal_model, after, span, span_s, phases), key, trial))
             # a removal whose re-fit converged is preferred; one is made in any case
             converged = [o for o in options if o[2].success] or options
             h, (joint, effect), self.current = min(converged, key=lambda o: o[0].rms_after)
@@ -749,7 +750,7 @@ class EffectSearch:
         like every other effect: the model holds its stop."""
         self.drop_until_better(self.srch, self.segment_s or SIMULATION_CHECK_S, "simulation_check",
                                "fit_span_simulated_rms", "simulating the fit span with {n} effect(s)", "simulation_check",
-                               signal_sigma=THRESHOLD_SIGMA)
+                               signal_sigma=THRESHOLD_SIGMA, phases=2)
 
     def held_out_check(self, held: Recording | None) -> bool:
         """Whether the held-out span ``held`` judged the selection.  A selection that predicts it
