@@ -135,11 +135,12 @@ class JointDynamics:
     Passive generalised force (see :mod:`kinemaforge_opt.physics.effects` for each term):
     -damping·v - coulomb·sign(v) - stribeck·exp(-(v/v_stribeck)²)·sign(v)
     - spring_stiffness·(q - spring_rest) + bias - drag·v·|v|
-    - max(limit_side·(q - limit_stop), 0)·(limit_stiffness + limit_damping·limit_side·v)·limit_side;
+    - max(limit_side·(q - limit_stop), 0)·(limit_stiffness + limit_damping·max(limit_side·v, 0))·limit_side;
     armature adds to the joint-space inertia diagonal (kg·m² or kg).  The last term is a stop
     found by ``diagnose`` (limit contact): a one-sided spring, with a damper that grows with the
-    penetration (Hunt–Crossley), beyond ``limit_stop`` [rad or m], above the motion
-    (``limit_side`` +1) or below it (-1); off while ``limit_stiffness`` is 0.
+    penetration (Hunt–Crossley) and acts only while the part moves into the stop (it never pulls),
+    beyond ``limit_stop`` [rad or m], above the motion (``limit_side`` +1) or below it (-1); off
+    while ``limit_stiffness`` is 0.  (sign and max are smoothed as the effect library does.)
     """
 
     damping: float = 0.0

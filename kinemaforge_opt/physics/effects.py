@@ -91,14 +91,20 @@ def _limit_contact(q, v, stop, k, c=0.0, eps=V_SMOOTH, side=1.0):
     # force is ramp·(k + c·side·v) (Hunt–Crossley: a spring, and a damper that grows with the
     # penetration, so the force starts at zero on contact; c = 0 is an elastic stop, a large c one
     # that stops a part dead).  The smooth ramp softplus(s·side·(q - stop)) / s approximates
-    # max(side·(q - stop), 0) with a 0.5 mrad (or 0.5 mm) rounding.
+    # max(side·(q - stop), 0) with a 0.5 mrad (or 0.5 mm) rounding.  The damper acts only while
+    # the part moves into the stop (its speed there, side·v, smoothly clipped at 0 over eps): on
+    # the way out it would pull, an adhesion no stop has (a drawer held shut by a spring, pushed
+    # out, was held back by it).  (Clipping k + c·side·v at 0 instead, smoothed over eps of
+    # speed, added c·eps/2 of stiffness at rest, which dwarfs k for a dead stop: no rigid stop
+    # was found.)
     s = 2000.0
     x = s * side * (q - stop)
     if _is_symbolic(x):  # overflow-free softplus: max(x, 0) + log(1 + exp(-|x|))
         ramp = (ca.fmax(x, 0) + ca.log(1 + ca.exp(-ca.fabs(x)))) / s
     else:  # the same overflow-free form (numpy arrays, or Drake expressions: no logaddexp there)
         ramp = (0.5 * (x + np.abs(x)) + np.log(1 + np.exp(-np.abs(x)))) / s
-    return -side * ramp * (k + c * side * v)
+    closing = side * v
+    return -side * ramp * (k + c * 0.5 * closing * (1.0 + smooth_sign(closing, eps)))
 
 
 EFFECTS: dict[str, Effect] = {

