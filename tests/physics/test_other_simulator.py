@@ -258,16 +258,16 @@ def test_a_part_stopped_dead_on_its_way_shut_is_found(category, stop):
     assert found["limit_contact"].value == pytest.approx(stop, abs=2 * NOISE[category])
 
 
-def _sprung_onto_stop(category: str, stiffness: float):
-    """The model of ``category``, the diagnosis of a 100-Hz Drake recording in which a spring of
-    ``stiffness`` (rest 0) holds the part on a rigid stop a tenth of its range above the model's
-    lower limit (the part starts there, and the open-loop pushes draw it off), and that stop [rad
-    or m]."""
+def _held_on_stop(category: str, **true_dynamics):
+    """The diagnosis of a 100-Hz Drake recording of the one-joint object of ``category`` in which
+    a force the model lacks (``true_dynamics``, JointDynamics fields) holds the part on a rigid
+    stop a tenth of its range above the model's lower limit (the part starts there, and the
+    open-loop pushes draw it off), and that stop [rad or m]."""
     model, joint, _, forcing = _pushed(category, 100)
     lim = joint.limits
     stop = lim.lower + 0.1 * (lim.upper - lim.lower)
     truth = model.with_joint(joint.name, limits=JointLimits(stop, lim.upper, lim.effort, lim.velocity),
-                             dynamics=JointDynamics(spring_stiffness=stiffness, spring_rest=0.0))
+                             dynamics=JointDynamics(**true_dynamics))
     motion = simulate_at(truth, np.array([stop]), np.zeros(1), forcing.t, tau=forcing, discrete=True)
     q = motion.q + np.random.default_rng(0).normal(0.0, NOISE[category], motion.q.shape)
     return diagnose(model, Recording(forcing.t, model.joint_names, q, tau=forcing.tau)), stop
@@ -279,7 +279,7 @@ def test_a_self_closing_door_gets_its_spring_and_its_stop():
     door through the stop, the stop alone does not bring it back), and forward selection
     reported quadratic drag and an axis tilt (held-out 2.3× better).  A force that acts at rest
     is now also fitted with a stop in the first round."""
-    d, stop = _sprung_onto_stop("cabinet", 0.5)
+    d, stop = _held_on_stop("cabinet", spring_stiffness=0.5, spring_rest=0.0)
     found = {e.type: e for e in d.effects}
     assert set(found) == {"limit_contact", "spring"}, d.summary()
     assert found["limit_contact"].value == pytest.approx(stop, abs=2 * NOISE["cabinet"])
@@ -293,11 +293,20 @@ def test_a_soft_close_drawer_gets_its_stop_and_a_spring():
     drew it out (x·c·v pulls where v leaves the stop).  The damper now acts only on the way in.
     Over the 7-cm travel the spring's rest trades with its stiffness (1.0 N/m is fitted, the
     interval excluding 2.0), so only the effects, the stop and the prediction are asserted."""
-    d, stop = _sprung_onto_stop("drawer", 2.0)
+    d, stop = _held_on_stop("drawer", spring_stiffness=2.0, spring_rest=0.0)
     found = {e.type: e for e in d.effects}
     assert set(found) == {"limit_contact", "spring"}, d.summary()
     assert found["limit_contact"].value == pytest.approx(stop, abs=2 * NOISE["drawer"])
     assert d.held_out.rms_after < 0.5 * d.held_out.rms_before
+
+
+def test_a_drawer_on_a_sloping_rail_gets_its_bias_and_its_stop():
+    """A constant −0.3 N (a rail sloping towards the back) holds the drawer on its stop."""
+    d, stop = _held_on_stop("drawer", bias=-0.3)
+    found = {e.type: e for e in d.effects}
+    assert set(found) == {"limit_contact", "constant_bias"}, d.summary()
+    assert found["limit_contact"].value == pytest.approx(stop, abs=2 * NOISE["drawer"])
+    assert found["constant_bias"].value == pytest.approx(-0.3, rel=0.05)
 
 
 def test_a_stop_is_guessed_where_the_motion_arrives_not_where_it_starts():
