@@ -92,20 +92,22 @@ def forward_dynamics(model: ArticulatedModel, q: np.ndarray, v: np.ndarray, tau:
     return np.array([pin.aba(pm, data, qq, vv, tt) for qq, vv, tt in zip(q, v, tau)])
 
 
-def link_inverse_dynamics(model: ArticulatedModel, link: str, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """(T, n) the share of M(q) a + h(q, v) [N·m or N] that the inertia of ``link`` alone (its
-    mass, centre of mass and rotational inertia, gravity included) takes along the states ``q``,
-    ``v``, ``a`` (T, n): Pinocchio's joint-torque regressor times that link's inertial parameters
-    in the frame of the joint it rides on.  Zero for a link without inertia or fixed to the world."""
-    inertial = model.link(link).inertial
+def link_inverse_dynamics(model: ArticulatedModel, links, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """(L, T, n) per link of ``links`` (L names), the share of M(q) a + h(q, v) [N·m or N] that its
+    inertia alone (mass, centre of mass and rotational inertia, gravity included) takes along the
+    states ``q``, ``v``, ``a`` (T, n): Pinocchio's joint-torque regressor, evaluated once per
+    sample, times the link's inertial parameters in the frame of the joint it rides on.  Zero for
+    a link without inertia or fixed to the world."""
     pm = build_pin_model(model)
-    frame = pm.frames[pm.getFrameId(link)]
-    if inertial is None or frame.parentJoint == 0:
-        return np.zeros_like(np.asarray(q, dtype=float))
     data = pm.createData()
-    Y = pin.Inertia(inertial.mass, np.asarray(inertial.com), np.asarray(inertial.inertia))
-    theta = frame.placement.act(Y).toDynamicParameters()
-    cols = slice(10 * (frame.parentJoint - 1), 10 * frame.parentJoint)
+    thetas = np.zeros((len(links), 10 * (pm.njoints - 1)))
+    for i, link in enumerate(links):
+        inertial = model.link(link).inertial
+        frame = pm.frames[pm.getFrameId(link)]
+        if inertial is not None and frame.parentJoint > 0:
+            Y = pin.Inertia(inertial.mass, np.asarray(inertial.com), np.asarray(inertial.inertia))
+            thetas[i, 10 * (frame.parentJoint - 1): 10 * frame.parentJoint] = frame.placement.act(Y).toDynamicParameters()
     # (the binding returns a 1-D array for a one-joint model, hence the reshape)
-    return np.array([np.reshape(pin.computeJointTorqueRegressor(pm, data, qq, vv, aa), (pm.nv, -1))[:, cols] @ theta
-                     for qq, vv, aa in zip(q, v, a)])
+    Y_t = np.array([np.reshape(pin.computeJointTorqueRegressor(pm, data, qq, vv, aa), (pm.nv, -1))
+                    for qq, vv, aa in zip(q, v, a)])
+    return np.einsum("tnp,lp->ltn", Y_t, thetas)

@@ -54,6 +54,11 @@ def block_means(a: np.ndarray | None, k: int) -> np.ndarray | None:
     return a[:T].reshape(T // k, k, *a.shape[1:]).mean(axis=1)
 
 
+def running_rms(x: np.ndarray, w: int) -> np.ndarray:
+    """(T,) the RMS of ``x`` (T,) over a centred window of ``w`` samples (zeros beyond the ends)."""
+    return np.sqrt(np.convolve(x**2, np.ones(w) / w, mode="same"))
+
+
 def smooth_derivatives(rec: Recording, window_s: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Savitzky–Golay (cubic) q, v, a (each (T, n)) from the recorded q; window ``window_s``
     (default DERIVATIVE_WINDOW_S), at least 7 samples."""
@@ -115,8 +120,7 @@ def locate(model: ArticulatedModel, rec: Recording, q_fit: np.ndarray, sigma_q: 
     force, q, v, _ = inverse_dynamics_residual(model, rec)
     out = []
     for k, j in enumerate(model.joint_names):
-        running = np.sqrt(np.convolve(err[:, k] ** 2, kernel, mode="same"))
-        windows = _windows(rec.t, running > THRESHOLD_SIGMA, min_gap_s=0.5)
+        windows = _windows(rec.t, running_rms(err[:, k], w) > THRESHOLD_SIGMA, min_gap_s=0.5)
         # Noise of the residual force: its high-frequency part (difference from a smoothed copy).
         r = force[:, k]
         smooth = np.convolve(r, kernel, mode="same")

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
+from .locate import running_rms
 
 # Held-out prediction: each model's starting state is fitted over this first part of a span [s]
 # (see simulate_recording); the rest of the span is the prediction that is scored.
@@ -67,11 +68,9 @@ class HeldOut:
         if signal_sigma is None:
             return np.sqrt(np.mean(e_b**2, axis=0)) - np.sqrt(np.mean(e_a**2, axis=0))
         w = max(1, int(round(SIGNAL_WINDOW_S / max(float(np.median(np.diff(self.t))), 1e-12)))) if self.t.size > 1 else 1
-        kernel = np.ones(w) / w
         gains = np.zeros(e_b.shape[1])
         for k in range(e_b.shape[1]):
-            running = [np.sqrt(np.convolve(e[:, k] ** 2, kernel, mode="same")) for e in (e_b, e_a)]
-            m = np.maximum(*running) >= signal_sigma
+            m = np.maximum(running_rms(e_b[:, k], w), running_rms(e_a[:, k], w)) >= signal_sigma
             if m.any():
                 gains[k] = np.sqrt(np.mean(e_b[m, k] ** 2)) - np.sqrt(np.mean(e_a[m, k] ** 2))
         return gains

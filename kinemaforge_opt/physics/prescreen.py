@@ -32,14 +32,14 @@ def limit_stop_guess(model: ArticulatedModel, rec: Recording) -> dict[str, tuple
         lo, hi = float(qk.min()), float(qk.max())
         band = 0.03 * max(hi - lo, 1e-12)
         away = max(2.0 * band, 5.0 * float(sigma[k]))  # left the band: beyond the noise's reach
+        extremes = ((1.0, qk >= hi - band, qk < hi - away), (-1.0, qk <= lo + band, qk > lo + away))
         push = {}
-        for side, near, far in ((1.0, qk >= hi - band, qk < hi - away), (-1.0, qk <= lo + band, qk > lo + away)):
+        for side, near, far in extremes:
             left = np.flatnonzero(far)
             arrived = near & (np.arange(qk.size) > left[0]) if left.size else near
             push[side] = -side * float(np.sum(force[arrived, k])) if arrived.any() else -np.inf
         if not np.isfinite(max(push.values())):  # the motion never left either band
-            push = {side: -side * float(np.sum(force[near, k]))
-                    for side, near in ((1.0, qk >= hi - band), (-1.0, qk <= lo + band))}
+            push = {side: -side * float(np.sum(force[near, k])) for side, near, _ in extremes}
         out[j] = (1.0, hi) if push[1.0] >= push[-1.0] else (-1.0, lo)
     return out
 
@@ -49,7 +49,7 @@ def inertia_columns(model: ArticulatedModel, q: np.ndarray, v: np.ndarray, a: np
     """(T, n) per joint, the pre-screen's column of an inertia error on it: the force its moved
     link's inertia takes along (q, v) (T, n), at the accelerations the model predicts under the
     recorded joint forces ``tau`` (T, n) and its own passive forces.  Without a recorded force
-    (``tau`` None or zero): the whole rigid-body force M a + h at the measured accelerations ``a``.
+    (``tau`` None): the whole rigid-body force M a + h at the measured accelerations ``a``.
 
     Why predicted accelerations: the residual force M a + h - tau is made of the measured ones,
     so a column made of them carries the very differentiation noise the residual carries and
@@ -60,12 +60,12 @@ def inertia_columns(model: ArticulatedModel, q: np.ndarray, v: np.ndarray, a: np
     single link's inertia scale is not identifiable at all (:mod:`.diagnose`); on the real Qube's
     free swings it reordered the later rounds and lost the arm's Coulomb friction (held-out
     0.030 / 0.028 -> 0.041 / 0.037 rad)."""
-    if tau is None or not np.any(tau != 0.0):
+    if tau is None:
         return inverse_dynamics(model, q, v, a)
-    passive = np.stack([j.dynamics.passive_force(q[:, k], v[:, k]) for k, j in enumerate(model.movable_joints)], axis=1)
-    a_pred = forward_dynamics(model, q, v, tau + passive)
-    return np.stack([link_inverse_dynamics(model, j.child, q, v, a_pred)[:, k] for k, j in enumerate(model.movable_joints)],
-                    axis=1)
+    joints = model.movable_joints
+    passive = np.stack([j.dynamics.passive_force(q[:, k], v[:, k]) for k, j in enumerate(joints)], axis=1)
+    shares = link_inverse_dynamics(model, [j.child for j in joints], q, v, forward_dynamics(model, q, v, tau + passive))
+    return np.stack([shares[k][:, k] for k in range(len(joints))], axis=1)
 
 
 def stribeck_speeds(v: np.ndarray, eps: float, n: int = 12) -> np.ndarray:

@@ -133,6 +133,12 @@ def rss_q(q_fit: np.ndarray, q_rec: np.ndarray, sigma_q: np.ndarray) -> float:
     return float(np.sum(((q_fit - q_rec) / sigma_q) ** 2))
 
 
+def delta_bic(rss: float, rss0: float, k: int, n_eff: float) -> float:
+    """BIC of a fit of residual sum of squares ``rss`` with ``k`` more free parameters than one
+    of ``rss0``, minus that one's, on ``n_eff`` effective samples (negative: better)."""
+    return float(n_eff * np.log(rss / rss0) + k * np.log(n_eff))
+
+
 def effective_count(residuals: np.ndarray) -> float:
     """Number of independent residuals among ``residuals`` (T, n): N (1 - rho)/(1 + rho), rho the
     pooled lag-1 autocorrelation of the per-joint series (white noise keeps N)."""
@@ -288,7 +294,8 @@ class EffectSearch:
         # the inertia column would "explain" too)
         block = max(1, int(round(srch.dt / fit_rec.dt)))
         self.r_nom, self.q_s, self.v_s, a_s = inverse_dynamics_residual(model, fit_rec, motion_window(fit_rec), block)
-        self.id_force = inertia_columns(model, self.q_s, self.v_s, a_s, block_means(fit_rec.tau, block))
+        self.id_force = inertia_columns(model, self.q_s, self.v_s, a_s,
+                                        block_means(fit_rec.tau, block) if self.forced else None)
         self.nominal_model = _model_of(model, self.nominal_trial, self.stops)
         self.n_res = srch.q.size
         # The prediction gate's judge (``prediction_gate``): the first other recording whose
@@ -588,15 +595,14 @@ class EffectSearch:
         for j, e in pairs:
             self.say(f"testing {e} on {j} with a stop")
         trials = self.trials([[(j, "limit_contact"), (j, e)] for j, e in pairs], self.current)
-        n_eff = effective_count((min(trials, key=self.rss).q_fit - self.srch.q) / self.sigma_s) if EFFECTIVE_N \
-            else float(self.n_res)
+        n_eff = self.sample_count(min(trials, key=self.rss))
         best_single = min([r["delta_bic"] for r in strong] + [0.0])
         rows = []
         for (j, e), trial in zip(pairs, trials):
             names = [effect_parameters(self.model, j, x) for x in ("limit_contact", e)]
             k = sum(n_free_params(n) for n in names)
             supported = trial.success and not any(_at_bound_values(trial, n, self.nominal_z) for n in names)
-            d = float(n_eff * np.log(self.rss(trial) / rss0) + k * np.log(n_eff))
+            d = delta_bic(self.rss(trial), rss0, k, n_eff)
             self.tested.append({"joint": j, "type": f"limit_contact+{e}", "delta_bic": d, "supported": supported,
                                 "iterations": trial.iterations, "status": trial.status, "n_eff": n_eff})
             if supported and d < best_single + DELTA_BIC:
@@ -627,6 +633,11 @@ class EffectSearch:
                          "rss": self.rss(trial), "effect_size_sigma": size, "supported": supported})
         return rows
 
+    def sample_count(self, trial: Trial) -> float:
+        """Effective sample count for BIC from ``trial``'s residuals on the search grid
+        (:func:`effective_count`; all of them without EFFECTIVE_N)."""
+        return effective_count((trial.q_fit - self.srch.q) / self.sigma_s) if EFFECTIVE_N else float(self.n_res)
+
     def score_round(self, rows: list[dict], rss0: float) -> float:
         """Adds ΔBIC, "below_floor" and the effect-size test to each row (and records them in
         ``tested``); returns the round's sample count for BIC."""
@@ -634,8 +645,7 @@ class EffectSearch:
         # from the residuals of the round's best-fitting supported hypothesis.
         pool = [r for r in rows if r["supported"]] or rows
         best_fit = min(pool, key=lambda r: r["rss"])
-        n_eff = effective_count((best_fit["trial"].q_fit - self.srch.q) / self.sigma_s) if EFFECTIVE_N \
-            else float(self.n_res)
+        n_eff = self.sample_count(best_fit["trial"])
         # An effect must move the fit by more than the noise, and by more than what the round's
         # best hypothesis still leaves unexplained (the noise floor the data and library reach:
         # the high-frequency noise estimate can be low).
@@ -643,7 +653,7 @@ class EffectSearch:
         for r in rows:
             r["below_floor"] = r["supported"] and MIN_EFFECT_SIZE_SIGMA <= r["effect_size_sigma"] < MIN_EFFECT_SIZE_SIGMA * floor
             r["supported"] = r["supported"] and r["effect_size_sigma"] >= MIN_EFFECT_SIZE_SIGMA * floor
-            r["delta_bic"] = float(n_eff * np.log(r["rss"] / rss0) + r["k"] * np.log(n_eff))
+            r["delta_bic"] = delta_bic(r["rss"], rss0, r["k"], n_eff)
             self.tested.append({"joint": r["joint"], "type": r["type"], "value": r["value"], "delta_bic": r["delta_bic"],
                                 "effect_size_sigma": r["effect_size_sigma"], "supported": r["supported"],
                                 "iterations": r["trial"].iterations, "status": r["trial"].status, "n_eff": n_eff,
@@ -664,7 +674,7 @@ class EffectSearch:
         rss_p = self.rss(parent)
         if n_eff * np.log(rss_p / rss0) >= -EQUIVALENT_LOGLIK:
             return best
-        d_new = float(n_eff * np.log(best["rss"] / rss_p) + best["k"] * np.log(n_eff))
+        d_new = delta_bic(best["rss"], rss_p, best["k"], n_eff)
         self.tested.append({"parent_refit": [f"{e} on {j}" for j, e, _ in self.selected],
                             "from": f"{best['type']} on {best['joint']}",
                             "delta_bic_parent": float(n_eff * np.log(rss_p / rss0)), "delta_bic": d_new})
@@ -767,8 +777,8 @@ class EffectSearch:
             self.equivalents.clear()
             return
         while True:
-            gains = h.joint_gains_sigma(self.sigma_q, signal_sigma)
-            gain = float(np.min(gains) if every_joint else np.max(gains))
+            gain = float(np.min(h.joint_gains_sigma(self.sigma_q, signal_sigma))) if every_joint \
+                else h.gain_sigma(self.sigma_q, signal_sigma)
             self.tested.append({check: [f"{e} on {j}" for j, e, _ in self.selected], rms_key: [h.rms_before, h.rms_after],
                                 "gain_sigma": gain})
             # better by more than the noise: a smaller gain is no evidence the selection explains the motion
