@@ -22,7 +22,7 @@ import numpy as np
 from ..physics.diagnose import before_nominal_stops
 from ..physics.search import HypothesisFit, effect_parameters
 from ..physics.selection import n_free_params, rss_q
-from ..nlp.joint_space import friction_smoothing, match_recording, noise_std
+from ..nlp.joint_space import friction_smoothing, match_recording, measurement_sigma
 from ..synth.effects import ConcealedEffect, tilted_axis
 from .recordings import EffectRecording
 
@@ -57,7 +57,7 @@ def oracle_delta_bic(er: EffectRecording) -> float | None:
         return None
     model = er.model
     fit_rec = before_nominal_stops(model, match_recording(model, er.recording))
-    sigma = noise_std(fit_rec.q)
+    sigma = measurement_sigma(fit_rec.q)
     hyps = [(e.joint, e.type) for e in effects]
     stops = {e.joint: (1.0 if dict(e.params).get("side") == "upper" else -1.0, e.value)
              for e in effects if e.type == "limit_contact"}

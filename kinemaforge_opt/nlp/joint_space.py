@@ -105,6 +105,25 @@ def noise_std(x: np.ndarray) -> np.ndarray:
     return np.maximum(1.4826 * mad / np.sqrt(20.0), 1e-9)
 
 
+def quantisation_sigma(q: np.ndarray) -> np.ndarray:
+    """Per joint (n,), the standard deviation of the rounding error of a quantised sensor [rad or
+    m]: its step (the smallest non-zero change between samples of ``q`` (T, n)) / sqrt(12); about
+    0 for an unquantised one."""
+    d = np.abs(np.diff(np.asarray(q, dtype=float), axis=0))
+    d = np.where(d > 1e-12, d, np.inf)
+    step = d.min(axis=0) if d.size else np.full(np.shape(q)[1], np.inf)
+    return np.where(np.isfinite(step), step, 0.0) / np.sqrt(12.0)
+
+
+def measurement_sigma(x: np.ndarray) -> np.ndarray:
+    """Per column (n,), the measurement error of a sampled signal (T, n) [its units]: the
+    high-frequency noise level (:func:`noise_std`), at least the sensor's rounding error
+    (:func:`quantisation_sigma`).  A quantised encoder that stands still for most of a recording
+    (a real pendulum come to rest) has third differences that are mostly exactly zero, so their
+    MAD, and with it noise_std, reads 0: every misfit would then count as millions of sigmas."""
+    return np.maximum(noise_std(x), quantisation_sigma(x))
+
+
 def friction_smoothing(rec: Recording) -> np.ndarray:
     """Per-joint width eps of the smooth sign tanh(v/eps) [rad/s or m/s]: 3 % of the joint's RMS
     speed in the recording.  Relative to the motion, so the friction law is sharp at the speeds
@@ -374,12 +393,12 @@ def build_joint_space_fit(
     else:
         prob.add_constraint("dynamics", D)
 
-    sq = noise_std(rec.q) if sigma_q is None else np.broadcast_to(np.asarray(sigma_q, float), (n,))
+    sq = measurement_sigma(rec.q) if sigma_q is None else np.broadcast_to(np.asarray(sigma_q, float), (n,))
     Rq = (Xs[:n, :] - rec.q.T) / sq[:, None]
     prob.add_cost("output_q", ca.sumsqr(Rq) / T)
     sv = None
     if rec.v is not None:
-        sv = noise_std(rec.v)
+        sv = measurement_sigma(rec.v)
         prob.add_cost("output_v", ca.sumsqr((Xs[n:, :] - rec.v.T) / sv[:, None]) / T)
 
     if energy != "off":

@@ -64,9 +64,9 @@ from ..calibration import Calibration
 from ..errors import DataError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
-from ..nlp.joint_space import friction_smoothing, match_recording, noise_std
+from ..nlp.joint_space import friction_smoothing, match_recording, measurement_sigma, noise_std
 from .locate import THRESHOLD_SIGMA, JointMismatch, block_means, locate
-from .predict import TOO_SPARSE, HeldOut, predict_before_after, quantisation_sigma
+from .predict import TOO_SPARSE, HeldOut, predict_before_after
 from .selection import CANDIDATES, DELTA_BIC, MAX_EFFECTS, SCREEN, EffectSearch, FoundEffect, span_words
 from .search import CPU_CAP_STATUS
 
@@ -208,7 +208,7 @@ def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
     """The recording up to the first time a joint reaches a stop that the model itself declares
     (its URDF limits, within max(5 noise sigma, 1 % of the range)): impacts on known stops are
     nominal physics, not a mismatch, and carry nothing about the joint's dynamics."""
-    sigma = noise_std(rec.q)
+    sigma = measurement_sigma(rec.q)
     hit = np.zeros(rec.t.size, dtype=bool)
     for k, j in enumerate(model.movable_joints):
         lim = j.limits
@@ -276,19 +276,17 @@ def diagnose(
         raise DataError(f"recording has {rec.t.size} samples: too few to fit and hold out {holdout_fraction:.0%}")
     fit_rec = rec.window(rec.t[0], rec.t[split - 1])
     held = rec.window(rec.t[split], rec.t[-1]) if split < rec.t.size - 3 else None
-    sigma_q = noise_std(fit_rec.q)
-    # whether a span shows signal is judged against at least the sensor's rounding error
-    sigma_signal = np.maximum(sigma_q, quantisation_sigma(rec.q))
+    sigma_q = measurement_sigma(fit_rec.q)
     # The hypothesis search runs on a coarser copy of the fit span (effects are low-bandwidth):
     # block means at SEARCH_RATE_HZ or more, with their own noise level; only the nominal and
     # the final model are fitted at the full rate.
     k_dec = search_decimation(fit_rec)
     srch = block_average(fit_rec, k_dec)
-    sigma_s = noise_std(srch.q) if k_dec == 1 else np.maximum(noise_std(srch.q), sigma_q / np.sqrt(k_dec))
+    sigma_s = np.maximum(noise_std(srch.q), sigma_q / np.sqrt(k_dec))
 
     say("fitting the nominal model" if k_dec == 1 else
         f"fitting the nominal model ({1 / srch.dt:.0f} Hz search grid, {k_dec}-sample block means)")
-    search = EffectSearch(model, srch, sigma_q, sigma_s, sigma_signal, friction_smoothing(srch), candidates,
+    search = EffectSearch(model, srch, sigma_q, sigma_s, friction_smoothing(srch), candidates,
                            segment_s, screen, other_recordings, say, fit_rec, workers)
     search.select(max_effects)
     search.simulation_check()

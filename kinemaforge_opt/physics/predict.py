@@ -97,17 +97,6 @@ def prediction_signal(h: HeldOut, sigma_q: np.ndarray) -> float:
     return float(np.max(np.sqrt(np.mean((h.q_before - h.q_rec) ** 2, axis=0)) / np.maximum(sigma_q, 1e-12)))
 
 
-def quantisation_sigma(q: np.ndarray) -> np.ndarray:
-    """Per joint (n,), the standard deviation of the rounding error of a quantised sensor [rad or
-    m]: its step (the smallest non-zero change between samples of ``q`` (T, n)) / sqrt(12); about
-    0 for an unquantised one.  The high-frequency noise estimate of a quantised encoder that
-    mostly stands still can fall below it."""
-    d = np.abs(np.diff(q, axis=0))
-    d = np.where(d > 1e-12, d, np.inf)
-    step = d.min(axis=0) if d.size else np.full(q.shape[1], np.inf)
-    return np.where(np.isfinite(step), step, 0.0) / np.sqrt(12.0)
-
-
 def simulate_segments(model: ArticulatedModel, rec: Recording, segment_s: float | None,
                       extra: dict | None = None, offset_s: float = 0.0) -> np.ndarray:
     """q (T, n) of ``model`` (plus ``extra`` force laws, see :func:`simulate_recording`) on ``rec``,

@@ -10,7 +10,7 @@ import numpy as np
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..model.pinocchio import forward_dynamics, inverse_dynamics, link_inverse_dynamics
-from ..nlp.joint_space import noise_std
+from ..nlp.joint_space import measurement_sigma
 from .effects import EFFECTS
 from .locate import inverse_dynamics_residual
 from .search import Trial
@@ -25,7 +25,7 @@ def limit_stop_guess(model: ArticulatedModel, rec: Recording) -> dict[str, tuple
     one end of its motion has not met a stop there (a drawer driven shut from its start onto a
     stop: the start's residual, differentiation noise at the edge, chose the start's end)."""
     force, q, _, _ = inverse_dynamics_residual(model, rec)
-    sigma = noise_std(rec.q)
+    sigma = measurement_sigma(rec.q)
     out = {}
     for k, j in enumerate(model.joint_names):
         qk = rec.q[:, k]

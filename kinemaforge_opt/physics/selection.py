@@ -259,20 +259,20 @@ class EffectSearch:
     dropped (``dropped``).  Its methods are the stages of the selection, run in order by
     :func:`~kinemaforge_opt.physics.diagnose.diagnose`.
 
-    sigma_q (n,): the encoder noise of one recorded sample; sigma_s (n,): the noise of the
-    search grid's block means; sigma_signal (n,): the level a span's nominal prediction error
-    must pass to show signal; eps (n,): the smooth-sign width [rad/s or m/s].  workers: processes
+    sigma_q (n,): the measurement error of one recorded sample (at least the sensor's rounding
+    error; a span's nominal prediction error must pass THRESHOLD_SIGMA of it to show signal);
+    sigma_s (n,): the noise of the search grid's block means; eps (n,): the smooth-sign width [rad/s or m/s].  workers: processes
     for a round's independent hypothesis fits (None: :func:`~kinemaforge_opt.parallel.workers`).
     fit_rec: the full-rate fit span whose block means ``srch`` is (the pre-screen's derivatives
     come from it)."""
 
     def __init__(self, model: ArticulatedModel, srch: Recording, sigma_q: np.ndarray, sigma_s: np.ndarray,
-                 sigma_signal: np.ndarray, eps: np.ndarray, candidates: tuple[str, ...], segment_s: float | None,
+                 eps: np.ndarray, candidates: tuple[str, ...], segment_s: float | None,
                  screen: int | None, other_recordings: tuple[Recording, ...], say, fit_rec: Recording,
                  workers: int | None = None):
         self.model, self.srch = model, srch
         self.workers = workers
-        self.sigma_q, self.sigma_s, self.sigma_signal, self.eps = sigma_q, sigma_s, sigma_signal, eps
+        self.sigma_q, self.sigma_s, self.eps = sigma_q, sigma_s, eps
         self.candidates, self.segment_s, self.screen = candidates, segment_s, screen
         self.other_recordings, self.say = other_recordings, say
         self.stops = limit_stop_guess(model, srch)
@@ -450,7 +450,7 @@ class EffectSearch:
                 span = match_recording(self.model, o)
                 self.say(f"checking whether other recording {k + 1} can judge effects below the model-form floor")
                 h = predict_before_after(self.nominal_model, self.nominal_model, span, self.segment_s)
-                signal = prediction_signal(h, self.sigma_signal)
+                signal = prediction_signal(h, self.sigma_q)
                 self.judge.setdefault("signal_sigma", {})[f"other_recording_{k + 1}"] = signal
                 if signal >= THRESHOLD_SIGMA:
                     self.judge["span"] = (f"other_recording_{k + 1}", span)
@@ -516,13 +516,14 @@ class EffectSearch:
             if not rows:
                 break
             n_eff, ok, strong, gated = self.judge_round(rows, rss0)
-            if not (strong or gated or self.selected) and len(screened) < len(pending) and self.mismatch_left(rss0):
+            rest = [je for je in pending if je not in screened]
+            if not (strong or gated or self.selected) and rest and self.mismatch_left(rss0):
                 # The linear pre-screen is a ranking, and where the residual force is mostly the
                 # noise of the measured accelerations its order is noise too (a 4-kg drawer at
                 # 30 Hz: M·a noise ~2 N against its 0.2 N of damping, ranked 10th of 18): when its
                 # best explain nothing of a mismatch the nominal model leaves, the rest are fitted.
                 self.say("the pre-screen's best hypotheses explain nothing; fitting the others")
-                rows = self.fit_round([je for je in pending if je not in screened])
+                rows, rest = self.fit_round(rest), []
                 n_eff, ok, strong, gated = self.judge_round(rows, rss0)
             pair = self.stop_pair(screened, strong, rss0) if not self.selected else None
             if pair is not None:
@@ -534,13 +535,16 @@ class EffectSearch:
                 strong_before = set()
                 continue
             strong_before = {(r["joint"], r["type"]) for r in strong}
-            if not strong and gated and self.other_recordings:
-                strong_before |= {(r["joint"], r["type"]) for r in gated}
-                passed = self.prediction_gate(gated[:PREDICTION_TRIES])
-                if passed is not None:
-                    strong = [{**passed, "supported": True}]
-                    self.gated_in.add((passed["joint"], passed["type"]))
-                    ok = ok + strong
+            strong, ok = self.gate_in(strong, gated, ok, strong_before)
+            if not (strong or self.selected) and rest and self.mismatch_left(rss0):
+                # The same when what the best offered is below the model-form floor and another
+                # recording refutes it (the Qube's fin11: the arm's inertia and a pendulum tilt
+                # predicted fin12 worse, while the pendulum's damping, ranked below them, was
+                # never fitted).
+                self.say("the pre-screen's best hypotheses do not carry over to another recording; fitting the others")
+                n_eff, ok, strong, gated = self.judge_round(self.fit_round(rest), rss0)
+                strong_before |= {(r["joint"], r["type"]) for r in strong}
+                strong, ok = self.gate_in(strong, gated, ok, strong_before)
             if not strong:
                 break
             best = self.unless_parent_fits_as_well(strong[0], rss0, n_eff)
@@ -556,6 +560,22 @@ class EffectSearch:
             self.say(f"selected {best['type']} on {best['joint']} (ΔBIC {best['delta_bic']:.0f})")
             self.swap_earlier(strong_before)
             self.drop_earlier()
+
+    def gate_in(self, strong: list[dict], gated: list[dict], ok: list[dict],
+                strong_before: set[tuple[str, str]]) -> tuple[list[dict], list[dict]]:
+        """(strong, ok) of a round after the prediction gate: with nothing strong, the first of
+        ``gated`` that predicts another recording better (:meth:`prediction_gate`) becomes the
+        round's one strong row.  The gated hypotheses join ``strong_before`` (in place: the next
+        round fits them again whatever the pre-screen says)."""
+        if strong or not gated or not self.other_recordings:
+            return strong, ok
+        strong_before |= {(r["joint"], r["type"]) for r in gated}
+        passed = self.prediction_gate(gated[:PREDICTION_TRIES])
+        if passed is None:
+            return strong, ok
+        self.gated_in.add((passed["joint"], passed["type"]))
+        passed = {**passed, "supported": True}
+        return [passed], ok + [passed]
 
     def judge_round(self, rows: list[dict], rss0: float) -> tuple[float, list[dict], list[dict], list[dict]]:
         """:meth:`score_round` of ``rows``, then (its sample count, the supported rows, the strong
@@ -853,7 +873,7 @@ class EffectSearch:
             for name, span in spans:
                 self.say(f"checking whether the {span_words(name)} can judge the effects")
                 h = predict_before_after(self.nominal_model, self.model_of(self.current), span, self.segment_s)
-                signal[name] = prediction_signal(h, self.sigma_signal)
+                signal[name] = prediction_signal(h, self.sigma_q)
                 if signal[name] < THRESHOLD_SIGMA:
                     continue
                 judged_by_held_out = name == "held_out"

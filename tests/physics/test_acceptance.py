@@ -88,7 +88,7 @@ def test_summary_says_a_held_out_span_without_signal_says_nothing():
 
 
 def test_quantisation_sigma_is_the_encoder_step_over_root_twelve():
-    from kinemaforge_opt.physics.predict import quantisation_sigma
+    from kinemaforge_opt.nlp.joint_space import quantisation_sigma
 
     step = 2 * np.pi / 2048
     t = np.linspace(0, 3, 300)
@@ -109,3 +109,16 @@ def test_diagnose_help_names_every_candidate_effect_and_the_threshold():
     library = EPILOG.split("tests the effect library (", 1)[1].split(")", 1)[0]
     assert [name.strip() for name in library.replace("\n", " ").split(",")] == list(CANDIDATES)
     assert f"ΔBIC < {DELTA_BIC:g}" in EPILOG
+
+
+def test_a_quantised_encoder_mostly_at_rest_is_not_called_noiseless():
+    """A real pendulum comes to rest: most third differences of its quantised angle are exactly 0,
+    so their MAD reads no noise at all and every misfit counted as millions of sigmas (the Qube's
+    fin3 arm); its measurement error is at least the encoder's rounding error."""
+    from kinemaforge_opt.nlp.joint_space import measurement_sigma, noise_std
+
+    step = 2 * np.pi / 2048
+    t = np.linspace(0, 10, 1000)
+    q = np.round(0.4 * np.exp(-t) * np.sin(6 * t) / step)[:, None] * step
+    assert noise_std(q)[0] < 1e-8
+    assert measurement_sigma(q)[0] == pytest.approx(step / np.sqrt(12), rel=1e-6)
