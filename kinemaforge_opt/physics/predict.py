@@ -106,7 +106,7 @@ def simulate_segments(model: ArticulatedModel, rec: Recording, segment_s: float 
     recording (its first ``offset_s`` a segment of its own)."""
     edges = [rec.t[0]] if not segment_s else \
         sorted({rec.t[0], *np.arange(rec.t[0] + offset_s, rec.t[-1], segment_s)})
-    edges.append(rec.t[-1] + 1e-9)
+    edges.append(np.inf)
     parts = []
     for a, b in zip(edges[:-1], edges[1:]):
         m = (rec.t >= a) & (rec.t < b)

@@ -388,3 +388,12 @@ def test_calibrate_separates_inertia_and_damping_only_under_a_recorded_force():
     ratio = float(swing.estimates["hinge.damping"].value[0]) / float(swing.estimates["rod.inertia_ratio"].value[0])
     assert ratio == pytest.approx(0.03, rel=0.01)
 
+
+
+def test_a_recording_stamped_in_unix_time_is_diagnosed_alike():
+    """Logged recordings carry epoch timestamps (~1.7e9 s), where float64 resolves ~0.2 µs: the
+    last prediction piece ended at t[-1] + 1e-9, which rounds to t[-1], so the last sample fell
+    out and the simulation check raised an IndexError."""
+    model, rec = _drake_recording("cabinet", damping=0.4)
+    d = diagnose(model, Recording(rec.t + 1.7e9, rec.joint_names, rec.q, tau=rec.tau))
+    assert {e.type: e.value for e in d.effects} == pytest.approx({"viscous_damping": 0.4}, rel=0.01), d.summary()
