@@ -23,7 +23,7 @@ small and JIT compilation is an option (FACTS.md).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -66,7 +66,33 @@ def match_recording(model: ArticulatedModel, recording: Recording) -> Recording:
     if np.all(np.ptp(rec.q, axis=0) < 1e-9):
         raise DataError("recording shows no motion: every joint stays at its initial position")
     check_units(model, rec)
-    return rec
+    return unwrapped_angles(model, rec)
+
+
+def unwrapped_angles(model: ArticulatedModel, rec: Recording) -> Recording:
+    """``rec`` (ordered as the model's joints) with each continuous joint's q unwrapped where it
+    jumps by more than π between samples: encoders and logs often report an angle in (−π, π],
+    and a pendulum spinning over the top then jumps by 2π where the model's angle goes on (fitted
+    as it was, every wrap is a misfit no effect explains).  Raises :class:`DataError` naming the
+    joint for such a jump on a revolute joint with finite limits, whose angle cannot wrap."""
+    q = rec.q
+    for k, j in enumerate(model.movable_joints):
+        if j.type not in ("revolute", "continuous"):
+            continue
+        jumps = np.flatnonzero(np.abs(np.diff(q[:, k])) > np.pi)
+        if not jumps.size:
+            continue
+        lim = j.limits
+        if j.type == "revolute" and lim is not None and np.isfinite(lim.lower) and np.isfinite(lim.upper):
+            i = int(jumps[0])
+            raise DataError(
+                f"recording q:{j.name} jumps by {q[i + 1, k] - q[i, k]:+.3g} rad between t = {rec.t[i]:.6g} and "
+                f"{rec.t[i + 1]:.6g} s, more than π in one sample, on a joint limited to [{lim.lower:.4g}, "
+                f"{lim.upper:.4g}] rad: a wrapped angle, or samples out of order?")
+        if q is rec.q:
+            q = rec.q.copy()
+        q[:, k] = np.unwrap(q[:, k])
+    return rec if q is rec.q else replace(rec, q=q)
 
 
 def check_units(model: ArticulatedModel, rec: Recording) -> None:

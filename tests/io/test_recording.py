@@ -27,6 +27,8 @@ BAD = {
                 r"q:hinge spans \[0, 73\.5\] but the joint's limits are \[0, 2\.4\] rad: degrees instead of radians\?"),
     "newton_millimetres": ("t,q:hinge,tau:hinge\n" + "".join(f"{0.01 * i},{0.01 * i},{5000.0}\n" for i in range(50)), None,
                            r"tau:hinge reaches 5000, over 100× the joint's effort limit 5"),
+    "jump": ("t,q:hinge\n" + "".join(f"{0.1 * i},{0.1 if i < 2 else 3.3}\n" for i in range(12)), None,
+             r"q:hinge jumps by \+3\.2 rad between t = 0\.1 and 0\.2 s, more than π in one sample, on a joint limited"),
     "nan_torque": ("t,q:hinge,tau:hinge\n0,0,0\n0.1,0.1,nan\n0.2,0.2,0\n", r"tau:hinge is not finite at row 1", None),
 }
 

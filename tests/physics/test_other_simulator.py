@@ -397,3 +397,18 @@ def test_a_recording_stamped_in_unix_time_is_diagnosed_alike():
     model, rec = _drake_recording("cabinet", damping=0.4)
     d = diagnose(model, Recording(rec.t + 1.7e9, rec.joint_names, rec.q, tau=rec.tau))
     assert {e.type: e.value for e in d.effects} == pytest.approx({"viscous_damping": 0.4}, rel=0.01), d.summary()
+
+
+def test_a_pendulum_spinning_over_the_top_recorded_as_a_wrapped_angle_is_unwrapped():
+    """The Furuta pendulum given 60 rad/s spins over the top (14.9 rad in all); its angle
+    recorded in (−π, π] jumps by 2π at every turn, and the search found nothing in such a
+    recording.  A continuous joint's angle is unwrapped; the pendulum's damping is found."""
+    nominal = read_urdf(FURUTA)
+    truth = nominal.with_joint("alpha", dynamics=JointDynamics(damping=2e-4))
+    t = np.arange(0.0, 8.0 + 1e-9, 0.01)
+    motion = simulate_at(truth, np.zeros(2), np.array([0.0, 60.0]), t, discrete=False)
+    q = motion.q + np.random.default_rng(0).normal(0.0, 1e-3, motion.q.shape)
+    q[:, 1] = np.angle(np.exp(1j * q[:, 1]))
+    d = diagnose(nominal, Recording(t, nominal.joint_names, q))
+    assert {(e.joint, e.type): e.value for e in d.effects} == pytest.approx({("alpha", "viscous_damping"): 2e-4},
+                                                                           rel=0.05), d.summary()
