@@ -60,3 +60,17 @@ def test_free_axes_switches_the_gravity_aligned_refit_off(tmp_path, monkeypatch,
         main(["reconstruct", str(seq), "-o", str(tmp_path / "out"), *flags])
     assert seen["nlp_options"].gravity_aligned is aligned
     assert seen["density"] == pipeline.DEFAULT_DENSITY
+
+
+@pytest.mark.slow
+def test_without_recorded_forces_the_drift_is_said_to_measure_the_push(tmp_path, capsys):
+    from kinemaforge_opt.synth import generate_case
+    from problems.catalogue import get_case
+
+    paths = generate_case(dataclasses.replace(get_case("tiny_door_clean"), frames=10), tmp_path / "case")
+    (paths.sequence / "wrenches.csv").unlink()
+    assert main(["reconstruct", str(paths.sequence), "-o", str(tmp_path / "r")]) == 0
+    text = capsys.readouterr().out
+    assert "Drake verification (none (free response))" in text
+    assert "the drift measures that push, not the model" in text
+    assert "<dynamics" not in (tmp_path / "r" / "model.urdf").read_text()

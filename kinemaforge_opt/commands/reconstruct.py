@@ -183,5 +183,9 @@ def _run_sequence(args) -> int:
     print(f"Drake verification ({v['forcing']}): drift [m] {drift}; energy residual {v['energy_residual']:.3g} "
           f"({v['timing_s']['total']:.1f} s)")
     print(f"  * past the {v['recording_duration_s']:.1f} s recording: distance to its last pose, held")
+    if v["contacts"] == [] and v["forcing"].startswith("none"):
+        print("  no wrenches.csv: Drake replays the free response from the first state, so wherever something "
+              "pushed a part the drift measures that push, not the model (its dynamics are the meshes' "
+              "inertia with no damping: without forces nothing fixes them)")
     print(f"wrote {args.out / 'recording.csv'}, tracks.csv, trajectories.png; verification in reconstruction.json")
     return 0
