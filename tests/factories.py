@@ -58,3 +58,30 @@ def shared_data_dir():
 
     env = os.environ.get("KINEMAFORGE_SHARED_DATA")
     return Path(env) if env else Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def lid_lifted_off_its_stop(dynamics: dict, noise: float = 2e-3) -> tuple:
+    """A laptop lid resting shut under its weight on its stop (MuJoCo's joint limit) until a hand
+    (a PD law with gravity feed-forward, in the loop at 1 kHz) lifts it to 1.2 rad, lowers it to
+    0.4, lifts it to 1.0 and puts it back, the lid's true joint dynamics ``dynamics``
+    (JointDynamics fields): (the nominal model, a Recording of q at 30 Hz with ``noise`` [rad] and
+    the hand's torque)."""
+    from kinemaforge_opt.arm.mujoco_real import arm_from_model, run_controller
+    from kinemaforge_opt.io.recording import Recording
+    from kinemaforge_opt.synth.objects import make_object
+
+    model = make_object("laptop", 0).model
+    (joint,) = model.movable_joints
+    arm = arm_from_model(model.with_joint(joint.name, dynamics=JointDynamics(**dynamics)))
+    t = np.arange(0.0, 6.5 + 1e-9, arm.dt)
+    q_ref = np.convolve(np.interp(t, [0, 0.6, 2.0, 3.2, 4.4, 5.6, 6.5], [0, 0, 1.2, 0.4, 1.0, 0, 0]),
+                        np.ones(301) / 301, mode="same")
+    v_ref = np.gradient(q_ref, t)
+
+    def hand(tk, q, v, k):  # no touch before 0.6 s
+        return np.array([0.0 if tk < 0.6 else 8.0 * (q_ref[k] - q[0]) + 0.4 * (v_ref[k] - v[0]) + 0.55 * np.cos(q_ref[k])])
+
+    _, true = run_controller(arm, t, np.zeros(1), np.zeros(1), hand)
+    every = int(round(1 / (30 * arm.dt)))
+    q = true.q[::every] + np.random.default_rng(0).normal(0, noise, true.q[::every].shape)
+    return model, Recording(t[::every], model.joint_names, q, tau=true.tau[::every])

@@ -19,10 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..physics.diagnose import before_nominal_stops
 from ..physics.search import HypothesisFit, effect_parameters
 from ..physics.selection import n_free_params, rss_q
-from ..nlp.joint_space import friction_smoothing, match_recording, measurement_sigma
+from ..nlp.joint_space import before_nominal_stops, friction_smoothing, match_recording, measurement_sigma
 from ..synth.effects import ConcealedEffect, tilted_axis
 from .recordings import EffectRecording
 

@@ -23,7 +23,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from ..physics.diagnose import before_nominal_stops
+from ..nlp.joint_space import before_nominal_stops
 from ..physics.predict import STATE_WINDOW_S, simulate_segments
 from ..physics.selection import DELTA_BIC
 from .baselines import BaselineResult, idls, sindy, split

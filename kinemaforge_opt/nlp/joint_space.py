@@ -31,7 +31,7 @@ import numpy as np
 from ..errors import DataError, KinemaforgeError, UnknownNameError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
-from ..model.pinocchio import build_pin_model
+from ..model.pinocchio import build_pin_model, forward_dynamics
 from ..physics.effects import EFFECTS, FORCE_EFFECTS, dynamics_effects
 from ..symbolic import Dynamics, available_parameters, build_dynamics
 from .parameters import (
@@ -93,6 +93,61 @@ def unwrapped_angles(model: ArticulatedModel, rec: Recording) -> Recording:
             q = rec.q.copy()
         q[:, k] = np.unwrap(q[:, k])
     return rec if q is rec.q else replace(rec, q=q)
+
+
+def _rest_acceleration(model: ArticulatedModel, rec: Recording, samples: int) -> np.ndarray:
+    """(samples, n) accelerations [rad/s² or m/s²] of the nominal model held at rest at each of
+    the first ``samples`` recorded positions under the recorded force and its passive forces
+    (gravity, springs, bias; friction vanishes at rest)."""
+    q = rec.q[:samples]
+    tau = np.zeros_like(q) if rec.tau is None else rec.tau[:samples].copy()
+    for k, j in enumerate(model.movable_joints):
+        tau[:, k] += j.dynamics.passive_force(q[:, k], np.zeros(samples))
+    return forward_dynamics(model, q, np.zeros_like(q), tau)
+
+
+def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
+    """The recording between the stops that the model itself declares (its URDF limits, within
+    max(5 noise sigma, 1 % of the range)): without the start where a joint rests on one pressed
+    into it, up to the first time a joint reaches one after moving clear.  Contact with a known
+    stop is nominal physics, not a mismatch, and carries nothing about the joint's dynamics; the
+    model has no law for the stop's force, so a lid resting shut under its weight before a hand
+    lifts it was "explained" by a spring holding it up.  A part merely resting there, nothing
+    pressing it into the stop (a door before the hand pushes it open), is kept: its breakaway
+    tells friction."""
+    sigma = measurement_sigma(rec.q)
+    hit = np.zeros(rec.t.size, dtype=bool)
+    start = 0
+    for k, j in enumerate(model.movable_joints):
+        lim = j.limits
+        if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
+            continue
+        tol = max(5 * sigma[k], 0.01 * (lim.upper - lim.lower))
+        # ignore a start on a stop: count a stop only once the joint has been clear of both stops
+        # (summing |Δq| would count noise as motion; a departure measured from the first,
+        # noisy, sample counted a slow start off the stop as reaching it)
+        # (clear = beyond twice the tolerance: a slow start wanders in and out of the band's edge)
+        q = rec.q[:, k]
+        near = (q <= lim.lower + tol) | (q >= lim.upper - tol)
+        clear = (q > lim.lower + 2 * tol) & (q < lim.upper - 2 * tol)
+        hit |= np.maximum.accumulate(clear) & near
+        if near[0] and clear.any():  # starts on a stop and leaves it
+            resting = int(np.argmax(~near))
+            side = -1.0 if q[0] <= lim.lower + tol else 1.0
+            # pressed: the nominal model would have moved it into the stop by more than the noise
+            # within the time it rested there, so the stop's force held it
+            held = 2.0 * sigma[k] / max(rec.t[resting] - rec.t[0], rec.t[1] - rec.t[0]) ** 2
+            pressed = np.flatnonzero(side * _rest_acceleration(model, rec, resting)[:, k] > held)
+            if pressed.size:  # from the sample after the last one pressed into the stop
+                start = max(start, int(pressed[-1]) + 1)
+    end = int(np.argmax(hit)) if hit.any() else rec.t.size
+    if (start, end) == (0, rec.t.size):
+        return rec
+    if end - start < 20:
+        raise DataError(
+            f"the recording moves clear of the joint stops the model declares only from {rec.t[start] - rec.t[0]:.2f} "
+            f"to {rec.t[end - 1] - rec.t[0]:.2f} s (samples {start}–{end - 1}); too little motion to diagnose")
+    return rec.window(rec.t[start], rec.t[end - 1])
 
 
 def check_units(model: ArticulatedModel, rec: Recording) -> None:

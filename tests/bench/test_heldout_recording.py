@@ -4,7 +4,7 @@ import numpy as np
 
 from kinemaforge_opt.bench.discovery import segment_rms
 from kinemaforge_opt.bench.recordings import NOISE, other_recording
-from kinemaforge_opt.physics.diagnose import before_nominal_stops
+from kinemaforge_opt.nlp.joint_space import before_nominal_stops
 from kinemaforge_opt.synth.effects import true_model
 
 

@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 
+from factories import lid_lifted_off_its_stop
 from kinemaforge_opt.cli import main as cli_main
 from kinemaforge_opt.errors import DataError
 from kinemaforge_opt.io.recording import Recording, write_recording
@@ -157,7 +158,7 @@ def test_bad_input_is_named(friction_case, tmp_path):
 def test_noise_at_rest_on_a_stop_is_not_reaching_it():
     """A door resting on its closed stop (q = lower limit) with encoder noise, then pushed open and
     back onto the stop: the recording is cut where it returns, not in the noisy rest."""
-    from kinemaforge_opt.physics.diagnose import before_nominal_stops
+    from kinemaforge_opt.nlp.joint_space import before_nominal_stops
 
     model, _ = _door_recording(lambda j: ())
     lim = model.movable_joints[0].limits
@@ -245,37 +246,13 @@ def test_a_recording_too_sparse_to_simulate_reports_nothing_and_says_why(tmp_pat
     assert "fit_before_after" not in paths and paths["residual_time"].stat().st_size > 1000
 
 
-def _lid_recording(dynamics: dict) -> tuple:
-    """A laptop lid resting shut under its weight on its stop (MuJoCo's joint limit) until a hand
-    (a PD law with gravity feed-forward, in the loop at 1 kHz) lifts it to 1.2 rad, lowers it to
-    0.4, lifts it to 1.0 and puts it back: q at 30 Hz with 2 mrad noise and the hand's torque."""
-    from kinemaforge_opt.arm.mujoco_real import arm_from_model, run_controller
-    from kinemaforge_opt.model import JointDynamics
-
-    model = make_object("laptop", 0).model
-    (joint,) = model.movable_joints
-    arm = arm_from_model(model.with_joint(joint.name, dynamics=JointDynamics(**dynamics)))
-    t = np.arange(0.0, 6.5 + 1e-9, arm.dt)
-    q_ref = np.convolve(np.interp(t, [0, 0.6, 2.0, 3.2, 4.4, 5.6, 6.5], [0, 0, 1.2, 0.4, 1.0, 0, 0]),
-                        np.ones(301) / 301, mode="same")
-    v_ref = np.gradient(q_ref, t)
-
-    def hand(tk, q, v, k):  # no touch before 0.6 s
-        return np.array([0.0 if tk < 0.6 else 8.0 * (q_ref[k] - q[0]) + 0.4 * (v_ref[k] - v[0]) + 0.55 * np.cos(q_ref[k])])
-
-    _, true = run_controller(arm, t, np.zeros(1), np.zeros(1), hand)
-    every = int(round(1 / (30 * arm.dt)))
-    q = true.q[::every] + np.random.default_rng(0).normal(0, NOISE, true.q[::every].shape)
-    return model, Recording(t[::every], model.joint_names, q, tau=true.tau[::every])
-
-
 @pytest.mark.parametrize("dynamics, found", [({}, {}), ({"damping": 0.02}, {"viscous_damping": 0.02}),
                                              ({"coulomb": 0.03}, {"coulomb_friction": 0.03})])
 def test_a_lid_resting_shut_under_its_weight_before_the_hand_lifts_it(dynamics, found):
     """The model has no law for the stop it declares, so while the lid rested on it its weight
     was a mismatch: the nominal prediction fell through the stop (0.9 rad off) and neither the
     damping nor the friction was found.  The recording is read from where the lid leaves it."""
-    model, rec = _lid_recording(dynamics)
+    model, rec = lid_lifted_off_its_stop(dynamics)
     d = diagnose(model, rec)
     assert {e.type: e.value for e in d.effects} == pytest.approx(found, rel=0.05), d.summary()
     if found:

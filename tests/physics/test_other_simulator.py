@@ -22,8 +22,8 @@ from kinemaforge_opt.calibration import calibrate
 from kinemaforge_opt.io.recording import Recording
 from kinemaforge_opt.model import ArticulatedModel, Inertial, Joint, JointDynamics, JointLimits, Link, read_urdf
 from kinemaforge_opt.model.pinocchio import build_pin_model, inverse_dynamics
-from kinemaforge_opt.nlp.joint_space import friction_smoothing
-from kinemaforge_opt.physics.diagnose import before_nominal_stops, diagnose
+from kinemaforge_opt.nlp.joint_space import before_nominal_stops, friction_smoothing
+from kinemaforge_opt.physics.diagnose import diagnose
 from kinemaforge_opt.physics.locate import JointMismatch, block_means, inverse_dynamics_residual, motion_window
 from kinemaforge_opt.physics.prescreen import inertia_columns, limit_stop_guess, screen_scores
 from kinemaforge_opt.physics.selection import CANDIDATES

@@ -9,7 +9,7 @@ import pytest
 
 from kinemaforge_opt.calibration import apply_parameters
 from kinemaforge_opt.io.recording import Recording
-from kinemaforge_opt.physics.diagnose import before_nominal_stops
+from kinemaforge_opt.nlp.joint_space import before_nominal_stops
 from kinemaforge_opt.physics.predict import HeldOut, predict_before_after, simulate_recording
 from kinemaforge_opt.synth.effects import ConcealedEffect as E
 from kinemaforge_opt.synth.groundtruth import HandPlan, simulate

@@ -76,7 +76,7 @@ def test_simulation_from_a_fitted_state_matches_the_true_system_to_the_noise(doo
 def test_a_slow_start_off_a_stop_is_not_reaching_it():
     """A door leaving its lower stop at 5 mrad/s under 2 mrad noise wanders in and out of the
     stop band's edge; the recording must not be cut there (it was, after 0.5 s)."""
-    from kinemaforge_opt.physics.diagnose import before_nominal_stops
+    from kinemaforge_opt.nlp.joint_space import before_nominal_stops
 
     model = make_object("cabinet", 0).model
     t = np.arange(0.0, 20.0, 0.01)
