@@ -1,5 +1,6 @@
 """Joint-space recordings (``recording.csv``): ``t`` then, per joint, ``q:<joint>`` and optionally
-``v:<joint>``, ``tau:<joint>`` (applied generalised force, N·m or N).  SI units, time-major."""
+``v:<joint>``, ``tau:<joint>`` (applied generalised force, N·m or N; a joint without one is driven
+by nothing, 0).  Velocities are given for every joint or for none.  SI units, time-major."""
 
 from __future__ import annotations
 
@@ -112,11 +113,15 @@ def read_recording(path: str | os.PathLike) -> Recording:
         raise InputFileError(f"{path}: every row must have {len(header)} values")
 
     def block(kind):
-        if not all((kind, j) in cols for j in joints):
-            if any((kind, j) in cols for j in joints):
-                missing = [j for j in joints if (kind, j) not in cols]
-                raise InputFileError(f"{path}: {kind} columns missing for joints {missing}")
+        if not any((kind, j) in cols for j in joints):
             return None
+        if kind == "tau":  # a joint without a tau column is driven by nothing: its applied force is 0
+            return np.stack([data[:, cols[(kind, j)]] if (kind, j) in cols else np.zeros(len(data))
+                             for j in joints], axis=1)
+        missing = [j for j in joints if (kind, j) not in cols]
+        if missing:
+            raise InputFileError(f"{path}: {kind} columns missing for joints {missing} (velocities are measured "
+                                 "for every joint or for none)")
         return data[:, [cols[(kind, j)] for j in joints]]
 
     try:

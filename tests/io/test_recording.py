@@ -59,3 +59,15 @@ def test_round_trip(tmp_path):
     again = read_recording(tmp_path / "again.csv")
     assert again.joint_names == ("hinge",) and (again.q == rec.q).all() and (again.tau == rec.tau).all()
     assert isinstance(rec, Recording) and rec.v is None
+
+
+def test_a_joint_without_a_tau_column_is_driven_by_nothing(tmp_path):
+    """DESIGN.md's recording.csv: tau is optional per joint (a Furuta pendulum's motor drives the
+    arm only); v is given for every joint or none."""
+    path = tmp_path / "furuta.csv"
+    path.write_text("t,q:theta,q:alpha,tau:theta\n" + "".join(f"{0.01 * i},{0.01 * i},{0.02 * i},0.5\n" for i in range(20)))
+    rec = read_recording(path)
+    assert rec.joint_names == ("theta", "alpha") and (rec.tau[:, 0] == 0.5).all() and (rec.tau[:, 1] == 0).all()
+    path.write_text("t,q:theta,q:alpha,v:theta\n0,0,0,0\n0.1,0.1,0.1,1\n")
+    with pytest.raises(InputFileError, match=r"v columns missing for joints \['alpha'\]"):
+        read_recording(path)
