@@ -146,7 +146,7 @@ def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
     if end - start < 20:
         raise DataError(
             f"the recording moves clear of the joint stops the model declares only from {rec.t[start] - rec.t[0]:.2f} "
-            f"to {rec.t[end - 1] - rec.t[0]:.2f} s (samples {start}–{end - 1}); too little motion to diagnose")
+            f"to {rec.t[end - 1] - rec.t[0]:.2f} s (samples {start}–{end - 1}); too little motion to fit")
     return rec.window(rec.t[start], rec.t[end - 1])
 
 
