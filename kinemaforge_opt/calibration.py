@@ -20,7 +20,7 @@ import numpy as np
 from .errors import KinemaforgeError
 from .io.recording import Recording
 from .model.articulated import ArticulatedModel, Inertial
-from .nlp.joint_space import JointSpaceFit, before_nominal_stops, build_joint_space_fit, match_recording
+from .nlp.joint_space import JointSpaceFit, build_joint_space_fit, fit_span
 from .nlp.parameters import FORCE_PARAMS
 from .nlp.sensitivity import fit_sensitivity
 
@@ -146,15 +146,14 @@ def calibrate(
     method: "collocation" (output error on q by direct collocation; any recording) or
     "inverse_dynamics" (torque error through RNEA on filtered states; needs recorded tau, scales
     to long high-rate recordings such as a 1 kHz robot arm; :mod:`kinemaforge_opt.nlp.inverse_dynamics`).
-    The fit reads the recording between the stops the model declares (``Calibration.recording``
-    is that span; the identifiability words say when it is shorter than the recording): the
-    model has no law for a stop's force (:func:`~kinemaforge_opt.nlp.joint_space.before_nominal_stops`).
+    The fit reads the recording without isolated spikes and between the stops the model declares,
+    whose force it has no law for (:func:`~kinemaforge_opt.nlp.joint_space.fit_span`;
+    ``Calibration.recording`` is what was read, the identifiability words say what was left out).
     Raises for bad input (unknown names, missing joints, no motion) before any work starts.
     """
     if method not in ("collocation", "inverse_dynamics"):
         raise KinemaforgeError(f"method must be 'collocation' or 'inverse_dynamics', got {method!r}")
-    whole = match_recording(model, recording)
-    rec = before_nominal_stops(model, whole)
+    rec, left_out = fit_span(model, recording)
     if method == "inverse_dynamics":
         from .nlp.inverse_dynamics import calibrate_inverse_dynamics
 
@@ -172,12 +171,7 @@ def calibrate(
         X = res.values["x"]
         z = np.concatenate([np.atleast_1d(res.values[f"p:{b.name}"]) for b in fit.blocks]) if fit.blocks else np.zeros(0)
         cal = _result(fit, res, X, z, time.perf_counter() - start)
-    if rec.t.size == whole.t.size:
-        return cal
-    span = (f"only {rec.t[0] - whole.t[0]:.3g}–{rec.t[-1] - whole.t[0]:.3g} s of the {whole.t[-1] - whole.t[0]:.3g}-s "
-            "recording was fitted: the rest is a joint pressed on, or reaching, a stop the model declares, whose "
-            "force the model has no law for")
-    return dataclasses.replace(cal, identifiability=(span, *cal.identifiability))
+    return dataclasses.replace(cal, identifiability=left_out + cal.identifiability) if left_out else cal
 
 
 def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: float) -> Calibration:

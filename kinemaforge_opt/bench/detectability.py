@@ -21,7 +21,7 @@ import numpy as np
 
 from ..physics.search import HypothesisFit, effect_parameters
 from ..physics.selection import n_free_params, rss_q
-from ..nlp.joint_space import before_nominal_stops, friction_smoothing, match_recording, measurement_sigma
+from ..nlp.joint_space import fit_span, friction_smoothing, measurement_sigma
 from ..synth.effects import ConcealedEffect, tilted_axis
 from .recordings import EffectRecording
 
@@ -55,7 +55,7 @@ def oracle_delta_bic(er: EffectRecording) -> float | None:
     if not effects:
         return None
     model = er.model
-    fit_rec = before_nominal_stops(model, match_recording(model, er.recording))
+    fit_rec, _ = fit_span(model, er.recording)  # what diagnose reads
     sigma = measurement_sigma(fit_rec.q)
     hyps = [(e.joint, e.type) for e in effects]
     stops = {e.joint: (1.0 if dict(e.params).get("side") == "upper" else -1.0, e.value)

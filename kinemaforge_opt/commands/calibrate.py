@@ -52,9 +52,9 @@ def run(args) -> int:
     model = read_urdf(args.model)
     rec = read_recording(args.recording)
     free = [s.strip() for s in args.free.split(",") if s.strip()] if args.free else None
-    from ..nlp.joint_space import before_nominal_stops, match_recording
+    from ..nlp.joint_space import fit_span
 
-    before_nominal_stops(model, match_recording(model, rec))  # names the joint at fault before any work
+    fit_span(model, rec)  # names the joint at fault before any work
     print(f"calibrating {len(rec.t)} samples × {len(rec.joint_names)} joints …", flush=True)
     cal = calibrate(model, rec, free=free, energy=args.energy, substeps=args.substeps, method=args.method)
     out = Path(args.out)

@@ -85,7 +85,7 @@ def run(args) -> int:
     from ..physics.diagnose import diagnose
     from ..physics.report import write_diagnosis
 
-    from ..nlp.joint_space import before_nominal_stops, match_recording
+    from ..nlp.joint_space import fit_span, match_recording
 
     model, rec, reconstructed = _inputs(args)
     nominal = model
@@ -93,7 +93,7 @@ def run(args) -> int:
         from ..verify.reconstruction import open_limits
 
         model = open_limits(model)
-    before_nominal_stops(model, match_recording(model, rec))  # bad input fails before any work (and the bar)
+    fit_span(model, rec)  # bad input fails before any work (and before the progress bar)
     bar = tqdm(desc="diagnose", unit="fit", leave=False)
 
     def progress(msg: str) -> None:

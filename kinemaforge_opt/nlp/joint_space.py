@@ -95,6 +95,47 @@ def unwrapped_angles(model: ArticulatedModel, rec: Recording) -> Recording:
     return rec if q is rec.q else replace(rec, q=q)
 
 
+SPIKE_SIGMA = 10.0  # a single sample this many noise sigmas off the line through its neighbours...
+SPIKE_ECHO = 0.2    # ...whose neighbours are off theirs by half that, the other way, within this share
+
+
+def without_spikes(rec: Recording) -> tuple[Recording, dict[str, list[float]]]:
+    """(``rec`` without its isolated spikes, {joint: times [s] left out}).  A tracker's glitch
+    moves one sample far off the motion: it stands SPIKE_SIGMA measurement sigmas or more off the
+    line through its two neighbours, and each neighbour stands half as far off the line through
+    its own neighbours the other way (the echo of the one displaced sample; SPIKE_ECHO of the
+    jump plus two sigmas).  A real reversal, even an instant rebound off a stop, leaves its
+    neighbours on their lines, so it is kept.  An output-error fit pulled by a glitch of 50
+    sigmas reported drag and friction for a door's damping."""
+    n = rec.t.size
+    if n < 5:
+        return rec, {}
+    t, q = rec.t, rec.q
+    w = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])  # sample i's place between its neighbours
+    dev = q[1:-1] - ((1 - w)[:, None] * q[:-2] + w[:, None] * q[2:])  # (T-2, n), sample i+1 off its line
+    sig = measurement_sigma(q) * np.sqrt(1.0 + w[:, None] ** 2 + (1 - w[:, None]) ** 2)
+    big = np.abs(dev) >= SPIKE_SIGMA * sig
+    echo = np.zeros_like(big)
+    tol = SPIKE_ECHO * np.abs(dev[1:-1]) + 2.0 * sig[1:-1]
+    echo[1:-1] = (np.abs(dev[:-2] + dev[1:-1] / 2) <= tol) & (np.abs(dev[2:] + dev[1:-1] / 2) <= tol)
+    spike = np.zeros((n, q.shape[1]), dtype=bool)
+    spike[1:-1] = big & echo
+    if not spike.any():
+        return rec, {}
+    keep = ~spike.any(axis=1)
+    left_out = {name: [float(x) for x in t[spike[:, k]]] for k, name in enumerate(rec.joint_names) if spike[:, k].any()}
+    pick = lambda a: None if a is None else a[keep]  # noqa: E731
+    return Recording(t[keep], rec.joint_names, q[keep], pick(rec.v), pick(rec.tau)), left_out
+
+
+def spike_words(left_out: dict[str, list[float]]) -> str:
+    """The sentence that says which samples :func:`without_spikes` left out."""
+    where = "; ".join(f"q:{j} at t = " + ", ".join(f"{x:.4g}" for x in ts[:5]) + (" …" if len(ts) > 5 else "")
+                      for j, ts in left_out.items())
+    return (f"left out {sum(map(len, left_out.values()))} isolated sample(s) ({where} s): each a single jump of "
+            f"{SPIKE_SIGMA:g}+ noise sigmas off its neighbours' line that both neighbours contradict (a tracking glitch)")
+
+
 def _rest_acceleration(model: ArticulatedModel, rec: Recording, samples: int) -> np.ndarray:
     """(samples, n) accelerations [rad/s² or m/s²] of the nominal model held at rest at each of
     the first ``samples`` recorded positions under the recorded force and its passive forces
@@ -148,6 +189,21 @@ def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
             f"the recording moves clear of the joint stops the model declares only from {rec.t[start] - rec.t[0]:.2f} "
             f"to {rec.t[end - 1] - rec.t[0]:.2f} s (samples {start}–{end - 1}); too little motion to fit")
     return rec.window(rec.t[start], rec.t[end - 1])
+
+
+def fit_span(model: ArticulatedModel, recording: Recording) -> tuple[Recording, tuple[str, ...]]:
+    """(the part of ``recording`` a fit of ``model`` reads, what was left out in words): the
+    recording matched to the model (:func:`match_recording`), without isolated spikes
+    (:func:`without_spikes`), between the stops the model declares (:func:`before_nominal_stops`)."""
+    whole = match_recording(model, recording)
+    clean, spikes = without_spikes(whole)
+    rec = before_nominal_stops(model, clean)
+    notes = [spike_words(spikes)] if spikes else []
+    if rec.t.size < clean.t.size:
+        notes.append(f"only {rec.t[0] - whole.t[0]:.3g}–{rec.t[-1] - whole.t[0]:.3g} s of the "
+                     f"{whole.t[-1] - whole.t[0]:.3g}-s recording was fitted: the rest is a joint pressed on, or "
+                     "reaching, a stop the model declares, whose force the model has no law for")
+    return rec, tuple(notes)
 
 
 def check_units(model: ArticulatedModel, rec: Recording) -> None:

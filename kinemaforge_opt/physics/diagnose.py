@@ -64,7 +64,7 @@ from ..calibration import Calibration
 from ..errors import DataError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
-from ..nlp.joint_space import before_nominal_stops, friction_smoothing, match_recording, measurement_sigma, noise_std
+from ..nlp.joint_space import fit_span, friction_smoothing, match_recording, measurement_sigma, noise_std
 from .locate import THRESHOLD_SIGMA, JointMismatch, block_means, locate
 from .predict import TOO_SPARSE, HeldOut, predict_before_after
 from .selection import CANDIDATES, DELTA_BIC, MAX_EFFECTS, SCREEN, EffectSearch, FoundEffect, span_words
@@ -183,6 +183,7 @@ class Diagnosis:
             if check.get(key):
                 lines.append(f"({check[key]})")
         lines += [f"({t['identifiability']})" for t in self.tested if "identifiability" in t]
+        lines += [f"({t['left_out']})" for t in self.tested if "left_out" in t]
         if not self.effects and self.segment_s is None and any(t.get("status") == CPU_CAP_STATUS for t in self.tested):
             lines.append("(the recording was fitted as one trajectory: a long recording of a sensitive system, such "
                          "as a swinging pendulum, may fit only in pieces; try segment_s=1, `--segment 1`)")
@@ -234,13 +235,12 @@ def diagnose(
     other threads may be inside CasADi or hold a lock the fits need while this runs.
     """
     say = progress or (lambda s: None)
-    rec = match_recording(model, recording)
+    rec, left_out = fit_span(model, recording)
     unknown = [c for c in candidates if c not in CANDIDATES]
     if unknown:
         raise DataError(f"unknown candidate effect(s) {unknown}; available: {', '.join(CANDIDATES)}")
     if workers is not None and workers < 1:
         raise DataError(f"workers={workers}: the hypothesis fits need at least one process")
-    rec = before_nominal_stops(model, rec)
     split = int(round(rec.t.size * (1 - holdout_fraction)))
     if split < 10:
         raise DataError(f"recording has {rec.t.size} samples: too few to fit and hold out {holdout_fraction:.0%}")
@@ -275,6 +275,7 @@ def diagnose(
     for k, other in enumerate(other_recordings):
         say(f"predicting other recording {k + 1}/{len(other_recordings)}")
         others.append(predict_before_after(model, final.model, match_recording(model, other), segment_s))
-    return Diagnosis(tuple(mismatch), tuple(found), tuple(search.tested), nominal, final, final.model, held_out,
-                     tuple(others), held_out_used_for_selection=judged_by_held_out, acceptance_check=acceptance,
+    tested = tuple({"left_out": words} for words in left_out) + tuple(search.tested)
+    return Diagnosis(tuple(mismatch), tuple(found), tested, nominal, final, final.model, held_out, tuple(others),
+                     held_out_used_for_selection=judged_by_held_out, acceptance_check=acceptance,
                      dropped=search.dropped, segment_s=segment_s)

@@ -1,0 +1,50 @@
+"""What a fit reads of a recording (``nlp.joint_space.fit_span``): isolated tracking glitches are
+left out, real reversals are kept, and what was left out is said."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinemaforge_opt.calibration import calibrate
+from kinemaforge_opt.io.recording import Recording
+from kinemaforge_opt.nlp.joint_space import without_spikes
+from kinemaforge_opt.physics.diagnose import diagnose
+
+from .test_other_simulator import _drake_recording
+
+GLITCHES = ((40, 0.15), (95, -0.2), (150, 0.1))  # (sample, jump [rad]): 50–100 noise sigmas
+
+
+def _glitched(rec: Recording) -> Recording:
+    q = rec.q.copy()
+    for i, jump in GLITCHES:
+        q[i] += jump
+    return Recording(rec.t, rec.joint_names, q, tau=rec.tau)
+
+
+def test_single_sample_glitches_are_left_out_and_said():
+    """Three glitches in 210 samples of a damped Drake door: the fit was pulled to quadratic drag
+    and Coulomb friction; without them the damping is found, and the summary names the samples."""
+    model, rec = _drake_recording("cabinet", damping=0.4)
+    glitched = _glitched(rec)
+    _, left_out = without_spikes(glitched)
+    assert left_out == {model.joint_names[0]: pytest.approx([rec.t[i] for i, _ in GLITCHES])}
+    d = diagnose(model, glitched)
+    assert {e.type: e.value for e in d.effects} == pytest.approx({"viscous_damping": 0.4}, rel=0.02), d.summary()
+    assert "left out 3 isolated sample(s)" in d.summary()
+    cal = calibrate(model, glitched, free=[f"{model.joint_names[0]}.damping"])
+    assert cal.estimates[f"{model.joint_names[0]}.damping"].value[0] == pytest.approx(0.4, rel=0.02)
+    assert cal.identifiability[0].startswith("left out 3 isolated sample(s)")
+
+
+@pytest.mark.parametrize("speed_sigmas", [8.0, 12.0, 20.0, 60.0])
+def test_an_instant_rebound_is_not_a_glitch(speed_sigmas):
+    """A part that bounces straight back off a stop between two samples looks, at its peak, like a
+    one-sample jump off its neighbours' line; but its neighbours stay on theirs."""
+    sigma, dt = 1e-3, 0.01
+    t = np.arange(0.0, 1.0, dt)
+    peak = 50
+    q = speed_sigmas * sigma * (1.0 - np.abs(np.arange(t.size) - peak) / 1.0) + np.random.default_rng(0).normal(0, sigma, t.size)
+    rec = Recording(t, ("j",), q[:, None])
+    assert without_spikes(rec)[1] == {}
