@@ -61,3 +61,15 @@ def test_calibrate_door_example_recovers_the_hidden_physics(tmp_path):
         assert np.rad2deg(axis_angle_error(axis, true_axis)) < 0.5, (energy, axis, true_axis)
     assert "max_iter=3: success=False, status 'Maximum_Iterations_Exceeded'" in out
     assert (tmp_path / "calibrated.urdf").is_file()
+
+
+def test_diagnose_real_qube_example_corrects_the_published_damping(tmp_path):
+    """On the real Qube (fin12, a 2048-count encoder standing still most of the time) the
+    pendulum's published damping is corrected downwards, and the two recordings never used are
+    predicted better."""
+    _run("05_diagnose_real_qube.py", "-o", str(tmp_path))
+    doc = json.loads((tmp_path / "diagnosis.json").read_text())
+    damping = [e for e in doc["effects"] if (e["joint"], e["type"]) == ("alpha", "viscous_damping")]
+    assert damping and damping[0]["value"] < damping[0]["params"]["nominal"], doc["effects"]
+    independent = [o for o in doc["others"] if not o["used_for_selection"]]
+    assert len(independent) == 2 and all(o["rms_after"] < 0.9 * o["rms_before"] for o in independent)

@@ -174,8 +174,10 @@ class Diagnosis:
         elif self.held_out is not None:
             span = "held-out span (used to check the effects: not independent)" if self.dropped.get("held_out_check") \
                 else "held-out"
-            lines.append(f"{span} prediction RMS: before {self.held_out.rms_before:.4g}, after "
-                         f"{self.held_out.rms_after:.4g} (×{self.held_out.rms_before / max(self.held_out.rms_after, 1e-12):.1f} better)"
+            before, after = self.held_out.rms_before, self.held_out.rms_after
+            # a span at rest, predicted exactly by both models, has no ratio
+            ratio = f" (×{before / after:.1f} better)" if after > 1e-9 else ""
+            lines.append(f"{span} prediction RMS: before {before:.4g}, after {after:.4g}{ratio}"
                          + ("" if (x := check.get("signal_sigma", {}).get("held_out")) is None or x >= THRESHOLD_SIGMA
                             else f"; the nominal model errs there by only {x:.1f} noise sigmas: the span shows no "
                                  "effect, this figure says nothing"))
