@@ -5,7 +5,8 @@ Per case and method: the effect types reported, true positives (type match), fal
 missed effects, the relative value error of each true positive, and the held-out RMS of the
 prediction before (nominal model) and after (augmented with what the method found): on the last
 quarter of the recording, and on the case's second recording (:func:`.recordings.other_recording`,
-another hand plan, never shown to a method) up to the first nominal stop, predicted in
+another hand plan, never shown to a method) over its longest stretch clear of the nominal stops
+(:func:`~kinemaforge_opt.nlp.joint_space.between_nominal_stops`), predicted in
 ``OTHER_SEGMENT_S`` pieces each from its own least-squares state.  A concealed
 ``limit_contact`` whose stop the motion never reached is not in the truth set (nothing in the
 data shows it); no method has a limit-contact hypothesis, so a reached stop counts as missed.
@@ -23,7 +24,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from ..nlp.joint_space import before_nominal_stops
+from ..nlp.joint_space import between_nominal_stops
 from ..physics.predict import STATE_WINDOW_S, simulate_segments
 from ..physics.selection import DELTA_BIC
 from .baselines import BaselineResult, idls, sindy, split
@@ -121,7 +122,7 @@ def run_case(case: str, noise_seed: int = 0) -> list[CaseScore]:
     er = effect_recording(case, noise_seed)
     truth = {e.type: e.value for e in er.shown_effects}
     _, held = split(er.recording.select(er.model.joint_names), HOLDOUT)
-    other = before_nominal_stops(er.model, other_recording(case, noise_seed).recording.select(er.model.joint_names))
+    other = between_nominal_stops(er.model, other_recording(case, noise_seed).recording.select(er.model.joint_names))
     other_before = segment_rms(er.model, other)
     t0 = time.perf_counter()
     d = diagnose(er.model, er.recording, holdout_fraction=HOLDOUT)

@@ -147,31 +147,29 @@ def _rest_acceleration(model: ArticulatedModel, rec: Recording, samples: int) ->
     return forward_dynamics(model, q, np.zeros_like(q), tau)
 
 
-def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
-    """The recording between the stops that the model itself declares (its URDF limits, within
-    max(5 noise sigma, 1 % of the range)): without the start where a joint rests on one pressed
-    into it, up to the first time a joint reaches one after moving clear.  Contact with a known
-    stop is nominal physics, not a mismatch, and carries nothing about the joint's dynamics; the
-    model has no law for the stop's force, so a lid resting shut under its weight before a hand
-    lifts it was "explained" by a spring holding it up.  A part merely resting there, nothing
-    pressing it into the stop (a door before the hand pushes it open), is kept: its breakaway
-    tells friction."""
+def between_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
+    """The longest stretch of the recording clear of the stops that the model itself declares
+    (its URDF limits, within max(5 noise sigma, 1 % of the range)).  Contact with a known stop is
+    nominal physics, not a mismatch, and carries nothing about the joint's dynamics; the model has
+    no law for the stop's force, so a lid resting shut under its weight before a hand lifts it was
+    "explained" by a spring holding it up.  In contact: a joint back at a stop after it had moved
+    clear (an arrival), and a start resting on one pressed into it.  A part merely resting there
+    at the start, nothing pressing it (a door before the hand pushes it open), is kept: its
+    breakaway tells friction.  A drawer pulled against its stop and pushed back keeps the longer of
+    the two strokes (the first alone was read before)."""
     sigma = measurement_sigma(rec.q)
-    hit = np.zeros(rec.t.size, dtype=bool)
-    start = 0
+    contact = np.zeros(rec.t.size, dtype=bool)
     for k, j in enumerate(model.movable_joints):
         lim = j.limits
         if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
             continue
         tol = max(5 * sigma[k], 0.01 * (lim.upper - lim.lower))
-        # ignore a start on a stop: count a stop only once the joint has been clear of both stops
-        # (summing |Δq| would count noise as motion; a departure measured from the first,
-        # noisy, sample counted a slow start off the stop as reaching it)
-        # (clear = beyond twice the tolerance: a slow start wanders in and out of the band's edge)
+        # an arrival counts once the joint has been clear of both stops, beyond twice the band (a
+        # slow start wanders in and out of the band's edge; summing |Δq| would count noise as motion)
         q = rec.q[:, k]
         near = (q <= lim.lower + tol) | (q >= lim.upper - tol)
         clear = (q > lim.lower + 2 * tol) & (q < lim.upper - 2 * tol)
-        hit |= np.maximum.accumulate(clear) & near
+        contact |= np.maximum.accumulate(clear) & near
         if near[0] and clear.any():  # starts on a stop and leaves it
             resting = int(np.argmax(~near))
             side = -1.0 if q[0] <= lim.lower + tol else 1.0
@@ -179,25 +177,29 @@ def before_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
             # within the time it rested there, so the stop's force held it
             held = 2.0 * sigma[k] / max(rec.t[resting] - rec.t[0], rec.t[1] - rec.t[0]) ** 2
             pressed = np.flatnonzero(side * _rest_acceleration(model, rec, resting)[:, k] > held)
-            if pressed.size:  # from the sample after the last one pressed into the stop
-                start = max(start, int(pressed[-1]) + 1)
-    end = int(np.argmax(hit)) if hit.any() else rec.t.size
-    if (start, end) == (0, rec.t.size):
+            if pressed.size:  # up to the last sample pressed into the stop
+                contact[: int(pressed[-1]) + 1] = True
+    if not contact.any():
         return rec
+    # the longest run of samples out of contact: [start, end)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], (~contact).astype(int), [0]])))
+    runs = edges.reshape(-1, 2)
+    start, end = (max(runs, key=lambda r: r[1] - r[0]) if runs.size else (0, 0))
     if end - start < 20:
-        raise DataError(
-            f"the recording moves clear of the joint stops the model declares only from {rec.t[start] - rec.t[0]:.2f} "
-            f"to {rec.t[end - 1] - rec.t[0]:.2f} s (samples {start}–{end - 1}); too little motion to fit")
+        where = f"from {rec.t[start] - rec.t[0]:.2f} to {rec.t[end - 1] - rec.t[0]:.2f} s (samples {start}–{end - 1})" \
+            if end > start else "at no time"
+        raise DataError(f"the recording stays clear of the joint stops the model declares at most {where}; "
+                        "too little motion to fit")
     return rec.window(rec.t[start], rec.t[end - 1])
 
 
 def fit_span(model: ArticulatedModel, recording: Recording) -> tuple[Recording, tuple[str, ...]]:
     """(the part of ``recording`` a fit of ``model`` reads, what was left out in words): the
     recording matched to the model (:func:`match_recording`), without isolated spikes
-    (:func:`without_spikes`), between the stops the model declares (:func:`before_nominal_stops`)."""
+    (:func:`without_spikes`), between the stops the model declares (:func:`between_nominal_stops`)."""
     whole = match_recording(model, recording)
     clean, spikes = without_spikes(whole)
-    rec = before_nominal_stops(model, clean)
+    rec = between_nominal_stops(model, clean)
     notes = [spike_words(spikes)] if spikes else []
     if rec.t.size < clean.t.size:
         notes.append(f"only {rec.t[0] - whole.t[0]:.3g}–{rec.t[-1] - whole.t[0]:.3g} s of the "

@@ -30,7 +30,7 @@ BAD = {
     "jump": ("t,q:hinge\n" + "".join(f"{0.1 * i},{0.1 if i < 2 else 3.3}\n" for i in range(12)), None,
              r"q:hinge jumps by \+3\.2 rad between t = 0\.1 and 0\.2 s, more than π in one sample, on a joint limited"),
     "stop_too_soon": ("t,q:hinge\n" + "".join(f"{0.1 * i},{min(1.0 + 0.15 * i, 2.4)}\n" for i in range(30)), None,
-                      r"moves clear of the joint stops the model declares only from 0\.00 to 0\.80 s .* too little motion to fit"),
+                      r"stays clear of the joint stops the model declares at most from 0\.00 to 0\.80 s .* too little motion to fit"),
     "nan_torque": ("t,q:hinge,tau:hinge\n0,0,0\n0.1,0.1,nan\n0.2,0.2,0\n", r"tau:hinge is not finite at row 1", None),
 }
 

@@ -158,7 +158,7 @@ def test_bad_input_is_named(friction_case, tmp_path):
 def test_noise_at_rest_on_a_stop_is_not_reaching_it():
     """A door resting on its closed stop (q = lower limit) with encoder noise, then pushed open and
     back onto the stop: the recording is cut where it returns, not in the noisy rest."""
-    from kinemaforge_opt.nlp.joint_space import before_nominal_stops
+    from kinemaforge_opt.nlp.joint_space import between_nominal_stops
 
     model, _ = _door_recording(lambda j: ())
     lim = model.movable_joints[0].limits
@@ -166,7 +166,7 @@ def test_noise_at_rest_on_a_stop_is_not_reaching_it():
     q = np.where(t < 1.0, lim.lower, lim.lower + 0.8 * np.sin(np.pi * np.clip(t - 1.0, 0, 2.0) / 2.0) ** 2)
     rng = np.random.default_rng(3)
     rec = Recording(t, model.joint_names, (q + rng.normal(0, NOISE, t.size))[:, None])
-    cut = before_nominal_stops(model, rec)
+    cut = between_nominal_stops(model, rec)
     assert 2.5 < cut.t[-1] < 3.0  # back on the stop near t = 3 s, not at the start
 
 

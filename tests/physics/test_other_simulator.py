@@ -22,7 +22,7 @@ from kinemaforge_opt.calibration import calibrate
 from kinemaforge_opt.io.recording import Recording
 from kinemaforge_opt.model import ArticulatedModel, Inertial, Joint, JointDynamics, JointLimits, Link, read_urdf
 from kinemaforge_opt.model.pinocchio import build_pin_model, inverse_dynamics
-from kinemaforge_opt.nlp.joint_space import before_nominal_stops, friction_smoothing
+from kinemaforge_opt.nlp.joint_space import between_nominal_stops, friction_smoothing
 from kinemaforge_opt.physics.diagnose import diagnose
 from kinemaforge_opt.physics.locate import JointMismatch, block_means, inverse_dynamics_residual, motion_window
 from kinemaforge_opt.physics.prescreen import inertia_columns, limit_stop_guess, screen_scores
@@ -315,7 +315,7 @@ def test_a_stop_is_guessed_where_the_motion_arrives_not_where_it_starts():
     do not count for the top).  On the span diagnose searches: before the model's own stops (the
     drawer is later driven onto its upper limit, which the model has)."""
     model, rec = _rigid_stop_recording("drawer", 0.02745, closing=True)
-    ((side, position),) = limit_stop_guess(model, before_nominal_stops(model, rec)).values()
+    ((side, position),) = limit_stop_guess(model, between_nominal_stops(model, rec)).values()
     assert side == -1.0 and position == pytest.approx(0.02745, abs=5 * NOISE["drawer"])  # the lowest noisy sample
 
 
@@ -412,3 +412,19 @@ def test_a_pendulum_spinning_over_the_top_recorded_as_a_wrapped_angle_is_unwrapp
     d = diagnose(nominal, Recording(t, nominal.joint_names, q))
     assert {(e.joint, e.type): e.value for e in d.effects} == pytest.approx({("alpha", "viscous_damping"): 2e-4},
                                                                            rel=0.05), d.summary()
+
+
+def test_a_door_driven_against_its_declared_stop_first_is_read_after_it_leaves():
+    """The door starts near the stop its URDF declares (Drake's discrete plant holds it there) and
+    the first push drives it into it; only after 3 s does the hand draw it back.  Read up to the
+    first arrival (under a second), the recording showed nothing; the longest stretch clear of
+    the stops is read instead."""
+    model, joint, _, forcing = _pushed("cabinet", RECORD_HZ)
+    lim = joint.limits
+    q0 = np.array([lim.upper - 0.1 * (lim.upper - lim.lower)])
+    truth = model.with_joint(joint.name, dynamics=JointDynamics(damping=0.4))
+    motion = simulate_at(truth, q0, np.zeros(1), forcing.t, tau=forcing, discrete=True)
+    q = motion.q + np.random.default_rng(0).normal(0.0, NOISE["cabinet"], motion.q.shape)
+    d = diagnose(model, Recording(forcing.t, model.joint_names, q, tau=forcing.tau))
+    assert {e.type: e.value for e in d.effects} == pytest.approx({"viscous_damping": 0.4}, rel=0.02), d.summary()
+    assert "only 3.07–7 s of the 7-s recording was fitted" in d.summary()

@@ -9,7 +9,7 @@ import pytest
 
 from kinemaforge_opt.calibration import apply_parameters
 from kinemaforge_opt.io.recording import Recording
-from kinemaforge_opt.nlp.joint_space import before_nominal_stops
+from kinemaforge_opt.nlp.joint_space import between_nominal_stops
 from kinemaforge_opt.physics.predict import HeldOut, predict_before_after, simulate_recording
 from kinemaforge_opt.synth.effects import ConcealedEffect as E
 from kinemaforge_opt.synth.groundtruth import HandPlan, simulate
@@ -38,7 +38,7 @@ def test_a_door_pressed_onto_its_stop_is_simulated_like_mujoco(door_on_a_stop):
     model, j, rec = door_on_a_stop
     # up to where the stop throws the door back onto its closed end (a range limit MuJoCo
     # enforces and the model's dynamics do not hold)
-    rec = before_nominal_stops(model, rec)
+    rec = between_nominal_stops(model, rec)
     assert rec.q[:, 0].max() > STOP + 0.01  # the hand does press the door into the stop
     damped = apply_parameters(model, {f"{j}.damping": np.array([0.5])})
     truth = apply_parameters(damped, {f"{j}.limit_stop": np.array([STOP]), f"{j}.limit_stiffness": np.array([STIFFNESS])})

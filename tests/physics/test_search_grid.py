@@ -76,16 +76,16 @@ def test_simulation_from_a_fitted_state_matches_the_true_system_to_the_noise(doo
 def test_a_slow_start_off_a_stop_is_not_reaching_it():
     """A door leaving its lower stop at 5 mrad/s under 2 mrad noise wanders in and out of the
     stop band's edge; the recording must not be cut there (it was, after 0.5 s)."""
-    from kinemaforge_opt.nlp.joint_space import before_nominal_stops
+    from kinemaforge_opt.nlp.joint_space import between_nominal_stops
 
     model = make_object("cabinet", 0).model
     t = np.arange(0.0, 20.0, 0.01)
     q = (0.005 * t + np.random.default_rng(1).normal(0.0, NOISE, t.size))[:, None]
     rec = Recording(t, model.joint_names, q, tau=np.zeros_like(q))
-    assert before_nominal_stops(model, rec).t.size == t.size
+    assert between_nominal_stops(model, rec).t.size == t.size
     # ... but a stroke that comes back onto the stop is cut there
     q_back = np.where(t < 10, 0.05 * t, 1.0 - 0.05 * t)[:, None] + np.random.default_rng(2).normal(0.0, NOISE, (t.size, 1))
-    cut = before_nominal_stops(model, Recording(t, model.joint_names, q_back, tau=np.zeros_like(q_back)))
+    cut = between_nominal_stops(model, Recording(t, model.joint_names, q_back, tau=np.zeros_like(q_back)))
     assert 19.0 < cut.t[-1] < 20.0 - 0.2
 
 
