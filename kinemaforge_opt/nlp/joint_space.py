@@ -99,6 +99,17 @@ SPIKE_SIGMA = 10.0  # a single sample this many noise sigmas off the line throug
 SPIKE_ECHO = 0.2    # ...whose neighbours are off theirs by half that, the other way, within this share
 
 
+GAP_INTERVALS = 5.0  # a sample interval this many times the median one is a gap in the recording
+
+
+def recording_gaps(t: np.ndarray) -> np.ndarray:
+    """Indices i (sample intervals t[i] → t[i+1]) longer than GAP_INTERVALS median intervals: a log
+    that paused or lost data.  What moved the part meanwhile is unknown (the recorded force is only
+    interpolated across), so fits and predictions do not carry the dynamics across a gap."""
+    dt = np.diff(np.asarray(t, dtype=float))
+    return np.flatnonzero(dt > GAP_INTERVALS * np.median(dt)) if dt.size else np.zeros(0, dtype=int)
+
+
 def without_spikes(rec: Recording) -> tuple[Recording, dict[str, list[float]]]:
     """(``rec`` without its isolated spikes, {joint: times [s] left out}).  A tracker's glitch
     moves one sample far off the motion: it stands SPIKE_SIGMA measurement sigmas or more off the
@@ -523,10 +534,15 @@ def build_joint_space_fit(
     mapped = interval.map(G - 1)
     D, Wk, dE = mapped(X[:, :-1], X[:, 1:], U[:, :-1], U[:, 1:], H, theta_mx, phi_mx)
     segment_starts = (0,)
+    # no continuity across a cut (grid interval index): every segment_s, and at the last substep
+    # of a gap in the recording (the gap's own nodes then end the segment before it, with no data)
+    gaps = recording_gaps(rec.t)
+    cuts = {int(i) * m + m - 1 for i in gaps}
     if segment_s:
-        cuts = np.flatnonzero(np.diff(np.floor((t_grid - t_grid[0]) / segment_s)) > 0)  # interval index at a cut
-        keep = np.setdiff1d(np.arange(G - 1), cuts)
-        segment_starts = (0,) + tuple(int(c) + 1 for c in cuts)
+        cuts |= {int(c) for c in np.flatnonzero(np.diff(np.floor((t_grid - t_grid[0]) / segment_s)) > 0)}
+    if cuts:
+        keep = np.setdiff1d(np.arange(G - 1), sorted(cuts))
+        segment_starts = (0,) + tuple(c + 1 for c in sorted(cuts))
         prob.add_constraint("dynamics", D[:, keep.tolist()])
         D = D[:, keep.tolist()]
     else:
@@ -543,7 +559,9 @@ def build_joint_space_fit(
     if energy != "off":
         per = max(1, int(round(energy_window_s / rec.dt))) * m
         edges = list(range(0, G - 1, per)) + [G - 1]
-        resid = ca.vertcat(*[ca.sum2(dE[:, a:b]) - ca.sum2(Wk[:, a:b]) for a, b in zip(edges[:-1], edges[1:])])
+        in_gap = {int(i) * m + s for i in gaps for s in range(m)}  # nothing recorded there to book
+        books = [[k for k in range(a, b) if k not in in_gap] for a, b in zip(edges[:-1], edges[1:])]
+        resid = ca.vertcat(*[ca.sum2(dE[:, ks]) - ca.sum2(Wk[:, ks]) for ks in books if ks])
         e_scale = _energy_scale(model, rec, v0)
         if energy == "soft":
             prob.add_cost("energy", ca.sumsqr(resid / e_scale) / len(edges), weight=energy_weight)

@@ -61,13 +61,22 @@ def running_rms(x: np.ndarray, w: int) -> np.ndarray:
 
 def smooth_derivatives(rec: Recording, window_s: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Savitzky–Golay (cubic) q, v, a (each (T, n)) from the recorded q; window ``window_s``
-    (default DERIVATIVE_WINDOW_S), at least 7 samples."""
+    (default DERIVATIVE_WINDOW_S), at least 7 samples.  Each stretch between gaps in the recording
+    (:func:`~kinemaforge_opt.nlp.joint_space.recording_gaps`) on its own: a window across a gap
+    reads its jump as motion."""
+    from ..nlp.joint_space import recording_gaps  # (joint_space imports this package's effects)
+
     dt = rec.dt
     w = max(7, int(round((window_s or DERIVATIVE_WINDOW_S) / dt)) | 1)
-    w = min(w, rec.t.size - 1 + rec.t.size % 2)  # the longest odd window the recording holds
-    q = savgol_filter(rec.q, w, 3, axis=0)
-    v = savgol_filter(rec.q, w, 3, deriv=1, delta=dt, axis=0)
-    a = savgol_filter(rec.q, w, 3, deriv=2, delta=dt, axis=0)
+    q, v, a = np.array(rec.q, dtype=float), np.zeros_like(rec.q), np.zeros_like(rec.q)
+    starts = [0, *(recording_gaps(rec.t) + 1), rec.t.size]
+    for i, j in zip(starts[:-1], starts[1:]):
+        ww = min(w, (j - i) - 1 + (j - i) % 2)  # the longest odd window the stretch holds
+        if ww < 5:  # too short for a cubic: kept as recorded, at rest
+            continue
+        q[i:j] = savgol_filter(rec.q[i:j], ww, 3, axis=0)
+        v[i:j] = savgol_filter(rec.q[i:j], ww, 3, deriv=1, delta=dt, axis=0)
+        a[i:j] = savgol_filter(rec.q[i:j], ww, 3, deriv=2, delta=dt, axis=0)
     return q, v, a
 
 

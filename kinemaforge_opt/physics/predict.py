@@ -11,6 +11,7 @@ import numpy as np
 
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
+from ..nlp.joint_space import recording_gaps
 from .locate import running_rms
 
 # Held-out prediction: each model's starting state is fitted over this first part of a span [s]
@@ -106,6 +107,7 @@ def simulate_segments(model: ArticulatedModel, rec: Recording, segment_s: float 
     recording (its first ``offset_s`` a segment of its own)."""
     edges = [rec.t[0]] if not segment_s else \
         sorted({rec.t[0], *np.arange(rec.t[0] + offset_s, rec.t[-1], segment_s)})
+    edges = sorted({*edges, *rec.t[recording_gaps(rec.t) + 1]})  # a gap starts a piece of its own
     edges.append(np.inf)
     parts = []
     for a, b in zip(edges[:-1], edges[1:]):
