@@ -93,8 +93,7 @@ def _data(model: ArticulatedModel, rec: Recording) -> _Data:
     moving = np.all(np.abs(v) > THRESHOLD_SIGMA * velocity_noise(rec), axis=1)
     tau = rec.tau if rec.tau is not None else np.zeros_like(q)
     joints = model.movable_joints
-    passive = np.stack([j.dynamics.passive_force(q[:, k], v[:, k]) for k, j in enumerate(joints)], axis=1)
-    id_force = r + tau + passive
+    id_force = r + tau + model.passive_forces(q, v)
     r, q, v, id_force = r[moving], q[moving], v[moving], id_force[moving]
     pm = build_pin_model(model)
     pd = pm.createData()

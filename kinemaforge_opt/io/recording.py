@@ -70,9 +70,12 @@ class Recording:
 
     def window(self, t_start: float, t_end: float) -> "Recording":
         """Samples with t_start <= t <= t_end."""
-        m = (self.t >= t_start) & (self.t <= t_end)
-        pick = lambda a: None if a is None else a[m]  # noqa: E731
-        return Recording(self.t[m], self.joint_names, self.q[m], pick(self.v), pick(self.tau))
+        return self.rows((self.t >= t_start) & (self.t <= t_end))
+
+    def rows(self, keep: np.ndarray) -> "Recording":
+        """The samples where the (T,) mask ``keep`` is true."""
+        pick = lambda a: None if a is None else a[keep]  # noqa: E731
+        return Recording(self.t[keep], self.joint_names, self.q[keep], pick(self.v), pick(self.tau))
 
 
 def read_recording(path: str | os.PathLike) -> Recording:

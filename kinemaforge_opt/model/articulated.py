@@ -287,6 +287,12 @@ class ArticulatedModel:
     def nq(self) -> int:
         return len(self.movable_joints)
 
+    def passive_forces(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(T, n) the joints' own passive forces (:meth:`JointDynamics.passive_force`) [N·m or N]
+        along the states ``q``, ``v`` (T, n)."""
+        return np.stack([j.dynamics.passive_force(q[:, k], v[:, k]) for k, j in enumerate(self.movable_joints)],
+                        axis=1)
+
     def joint_index(self, name: str) -> int:
         """Index of a movable joint in q."""
         names = self.joint_names

@@ -133,10 +133,8 @@ def without_spikes(rec: Recording) -> tuple[Recording, dict[str, list[float]]]:
     spike[1:-1] = big & echo
     if not spike.any():
         return rec, {}
-    keep = ~spike.any(axis=1)
     left_out = {name: [float(x) for x in t[spike[:, k]]] for k, name in enumerate(rec.joint_names) if spike[:, k].any()}
-    pick = lambda a: None if a is None else a[keep]  # noqa: E731
-    return Recording(t[keep], rec.joint_names, q[keep], pick(rec.v), pick(rec.tau)), left_out
+    return rec.rows(~spike.any(axis=1)), left_out
 
 
 def spike_words(left_out: dict[str, list[float]]) -> str:
@@ -151,11 +149,9 @@ def _rest_acceleration(model: ArticulatedModel, rec: Recording, samples: int) ->
     """(samples, n) accelerations [rad/s² or m/s²] of the nominal model held at rest at each of
     the first ``samples`` recorded positions under the recorded force and its passive forces
     (gravity, springs, bias; friction vanishes at rest)."""
-    q = rec.q[:samples]
-    tau = np.zeros_like(q) if rec.tau is None else rec.tau[:samples].copy()
-    for k, j in enumerate(model.movable_joints):
-        tau[:, k] += j.dynamics.passive_force(q[:, k], np.zeros(samples))
-    return forward_dynamics(model, q, np.zeros_like(q), tau)
+    q, v = rec.q[:samples], np.zeros_like(rec.q[:samples])
+    tau = v if rec.tau is None else rec.tau[:samples]
+    return forward_dynamics(model, q, v, tau + model.passive_forces(q, v))
 
 
 def between_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:

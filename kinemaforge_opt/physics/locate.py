@@ -17,6 +17,7 @@ from scipy.signal import savgol_filter
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..model.pinocchio import inverse_dynamics
+from ..nlp.joint_space import recording_gaps
 
 THRESHOLD_SIGMA = 3.0  # a window is flagged when its running RMS exceeds this many noise sigmas
 # Savitzky–Golay window of the derivatives [s] ...
@@ -64,8 +65,6 @@ def smooth_derivatives(rec: Recording, window_s: float | None = None) -> tuple[n
     (default DERIVATIVE_WINDOW_S), at least 7 samples.  Each stretch between gaps in the recording
     (:func:`~kinemaforge_opt.nlp.joint_space.recording_gaps`) on its own: a window across a gap
     reads its jump as motion."""
-    from ..nlp.joint_space import recording_gaps  # (joint_space imports this package's effects)
-
     dt = rec.dt
     w = max(7, int(round((window_s or DERIVATIVE_WINDOW_S) / dt)) | 1)
     q, v, a = np.array(rec.q, dtype=float), np.zeros_like(rec.q), np.zeros_like(rec.q)
@@ -100,8 +99,7 @@ def inverse_dynamics_residual(model: ArticulatedModel, rec: Recording, window_s:
     blocks of that many samples (on a search grid made of such means)."""
     q, v, a = smooth_derivatives(rec, window_s)
     tau = rec.tau if rec.tau is not None else np.zeros_like(q)
-    passive = np.stack([j.dynamics.passive_force(q[:, k], v[:, k]) for k, j in enumerate(model.movable_joints)], axis=1)
-    r = inverse_dynamics(model, q, v, a) - tau - passive
+    r = inverse_dynamics(model, q, v, a) - tau - model.passive_forces(q, v)
     return block_means(r, block), block_means(q, block), block_means(v, block), block_means(a, block)
 
 

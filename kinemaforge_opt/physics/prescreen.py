@@ -63,8 +63,8 @@ def inertia_columns(model: ArticulatedModel, q: np.ndarray, v: np.ndarray, a: np
     if tau is None:
         return inverse_dynamics(model, q, v, a)
     joints = model.movable_joints
-    passive = np.stack([j.dynamics.passive_force(q[:, k], v[:, k]) for k, j in enumerate(joints)], axis=1)
-    shares = link_inverse_dynamics(model, [j.child for j in joints], q, v, forward_dynamics(model, q, v, tau + passive))
+    accelerations = forward_dynamics(model, q, v, tau + model.passive_forces(q, v))
+    shares = link_inverse_dynamics(model, [j.child for j in joints], q, v, accelerations)
     return np.stack([shares[k][:, k] for k in range(len(joints))], axis=1)
 
 
