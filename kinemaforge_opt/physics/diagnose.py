@@ -6,7 +6,8 @@
 2. explains it by stepwise selection over the effect library, on block means of the fit span
    sampled at ``SEARCH_RATE_HZ`` or more (a faster recording is averaged down; its noise level is
    re-estimated there).  Per round only ``SCREEN`` hypotheses, ranked by a linear
-   inverse-dynamics pre-screen, plus those the previous round found strong, get an NLP fit.
+   inverse-dynamics pre-screen, plus those the previous round found strong, get an NLP fit
+   (all of them on a one-joint model: ``FIT_WHOLE_ROUND``).
    Every hypothesis (a set of (joint, effect) pairs) is a fit of one shared collocation NLP built once per recording
    (:mod:`.search`; effects left out are fixed at their "off" values), with physical sign bounds
    and identifiability bounds (a stop inside the half of the recorded range on its side, a
@@ -229,7 +230,8 @@ def diagnose(
     recordings.  other_recordings: further recordings of the same system, used only to compare
     predictions before vs after (``Diagnosis.held_out_others``).  screen: per selection round,
     fit only this many hypotheses by NLP, those that best reduce the inverse-dynamics residual
-    in a linear least-squares pre-screen (default ``SCREEN``; None: fit every hypothesis); the
+    in a linear least-squares pre-screen (default ``SCREEN``; None: fit every hypothesis; a
+    round of at most ``FIT_WHOLE_ROUND`` hypotheses, one joint's, is fitted whole); the
     same ranking picks the candidates tried in place of an earlier effect.  workers: processes
     that fit a round's hypotheses side by side (None: the CPUs this process may use, or
     OMP_NUM_THREADS; 1: all in this process); the findings do not depend on it.  More than one

@@ -83,6 +83,16 @@ CANDIDATES: tuple[str, ...] = (
     "stribeck_friction", "axis_tilt", "inertia_error", "limit_contact",
 )
 
+# A selection round of at most this many hypotheses, one joint's whole library, is fitted whole
+# whatever ``screen`` says (a swap's candidates are still screened).  Over a short stroke of a
+# heavy part, damping, Coulomb friction and quadratic drag are nearly collinear forces, and their
+# order in the pre-screen is the noise of the measured accelerations: a 4-kg drawer's damping of
+# 3.0 ranked sixth and the search settled on Coulomb friction + drag, as did a door whose
+# recording lost 2 s of 7.  On one joint fitting the rest costs ~0.5 s of a 10-s recording's
+# diagnosis; on more joints the ranking's savings keep the search affordable (the Qube: 18
+# hypotheses a round).
+FIT_WHOLE_ROUND = len(CANDIDATES)
+
 
 @dataclass(frozen=True)
 class FoundEffect:
@@ -487,12 +497,13 @@ class EffectSearch:
     # --- forward selection ------------------------------------------------------------------
 
     def screened(self, pending: list[tuple[str, str]], keep: list[tuple[str, str]],
-                 strong_before: set[tuple[str, str]]) -> list[tuple[str, str]]:
+                 strong_before: set[tuple[str, str]], whole: bool = False) -> list[tuple[str, str]]:
         """The hypotheses of ``pending`` (each added to ``keep``) that get an NLP fit: the
         ``screen`` best of the linear pre-screen, plus those the previous round's NLP fits found
         strong (the linear ranking is weak once an effect is in: its column absorbs what
-        collinear ones would explain)."""
-        if self.screen is None or len(pending) <= self.screen:
+        collinear ones would explain); all of them in a ``whole`` round (a selection round, not
+        a swap) of at most FIT_WHOLE_ROUND."""
+        if self.screen is None or len(pending) <= self.screen or (whole and len(pending) <= FIT_WHOLE_ROUND):
             return pending
         scores = screen_scores(self.model, pending, keep, self.r_nom, self.id_force, self.q_s, self.v_s, self.eps,
                                self.v_scale, self.stops)
@@ -511,7 +522,7 @@ class EffectSearch:
             pending = [(j, e) for j in self.model.joint_names for e in self.candidates
                        if not any(s[:2] == (j, e) for s in self.selected)
                        and self.identifiable(self.chosen() + [(j, e)])]
-            screened = self.screened(pending, self.chosen(), strong_before)
+            screened = self.screened(pending, self.chosen(), strong_before, whole=True)
             rows = self.fit_round(screened)
             if not rows:
                 break
