@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,7 +21,7 @@ import numpy as np
 from .errors import KinemaforgeError
 from .io.recording import Recording
 from .model.articulated import ArticulatedModel, Inertial
-from .nlp.joint_space import JointSpaceFit, build_joint_space_fit, fit_span
+from .nlp.joint_space import JointSpaceFit, build_joint_space_fit, fit_spans, join_recordings, joined_words
 from .nlp.parameters import FORCE_PARAMS
 from .nlp.sensitivity import fit_sensitivity
 
@@ -126,7 +127,7 @@ def apply_parameters(model: ArticulatedModel, values: dict[str, np.ndarray],
 
 def calibrate(
     model: ArticulatedModel,
-    recording: Recording,
+    recording: Recording | Sequence[Recording],
     free: tuple[str, ...] | list[str] | None = None,
     effects: dict[str, tuple[str, ...]] | None = None,
     energy: str = "soft",
@@ -149,11 +150,18 @@ def calibrate(
     The fit reads the recording without isolated spikes and between the stops the model declares,
     whose force it has no law for (:func:`~kinemaforge_opt.nlp.joint_space.fit_span`;
     ``Calibration.recording`` is what was read, the identifiability words say what was left out).
+    Several recordings of the same system are fitted together, one model for all, each followed
+    from its own state: joined end to end with a pause between them that fits and derivatives do
+    not cross (:func:`~kinemaforge_opt.nlp.joint_space.join_recordings`); ``Calibration.recording``
+    and ``q_fit`` are then on that joined time axis.
     Raises for bad input (unknown names, missing joints, no motion) before any work starts.
     """
     if method not in ("collocation", "inverse_dynamics"):
         raise KinemaforgeError(f"method must be 'collocation' or 'inverse_dynamics', got {method!r}")
-    rec, left_out = fit_span(model, recording)
+    spans, left_out = fit_spans(model, recording)
+    rec = join_recordings(spans)
+    if len(spans) > 1:
+        left_out += (joined_words(spans, rec),)
     if method == "inverse_dynamics":
         from .nlp.inverse_dynamics import calibrate_inverse_dynamics
 

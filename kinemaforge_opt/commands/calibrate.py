@@ -11,9 +11,15 @@ parameter names (--free, comma separated):
   <joint>.bias  .drag  .axis  .origin  .pitch  .armature      <link>.inertia      gravity
 default: <joint>.damping and <joint>.coulomb for every joint in the model.
 
-example:
+several recordings of the same system (--also): fitted together, one model for all, each
+followed from its own state (joined end to end with a pause the fit does not cross); what one
+recording cannot determine another may (a free swing fixes no inertia scale, a push does).
+They must record the same joints at sample rates within a factor of 2.
+
+examples:
   kinemaforge calibrate models/laptop/laptop.urdf rec.csv -o out/cal \\
       --free hinge.axis,hinge.damping,hinge.coulomb,hinge.spring_stiffness,hinge.spring_rest
+  kinemaforge calibrate door.urdf swing.csv --also push.csv -o out/cal --free hinge.damping,rod.inertia
 """
 
 
@@ -31,6 +37,8 @@ def register(sub) -> None:
     p.add_argument("model", help="URDF of the nominal model")
     p.add_argument("recording", help="recording.csv")
     p.add_argument("-o", "--out", required=True, help="output folder")
+    p.add_argument("--also", nargs="+", default=(), metavar="CSV",
+                   help="further recordings of the same system, fitted together with RECORDING.csv")
     p.add_argument("--free", default=None, help="comma-separated parameter names (see below)")
     p.add_argument("--energy", choices=("soft", "hard", "off"), default="soft",
                    help="energy balance as a soft penalty, a hard constraint, or off (default soft)")
@@ -50,13 +58,14 @@ def run(args) -> int:
     from ..model import read_urdf, write_urdf
 
     model = read_urdf(args.model)
-    rec = read_recording(args.recording)
+    recs = [read_recording(p) for p in (args.recording, *args.also)]
     free = [s.strip() for s in args.free.split(",") if s.strip()] if args.free else None
-    from ..nlp.joint_space import fit_span
+    from ..nlp.joint_space import fit_spans, join_recordings
 
-    fit_span(model, rec)  # names the joint at fault before any work
-    print(f"calibrating {len(rec.t)} samples × {len(rec.joint_names)} joints …", flush=True)
-    cal = calibrate(model, rec, free=free, energy=args.energy, substeps=args.substeps, method=args.method)
+    join_recordings(fit_spans(model, recs)[0])  # names the joint or recording at fault before any work
+    print(f"calibrating {sum(len(r.t) for r in recs)} samples × {len(recs[0].joint_names)} joints"
+          + (f" from {len(recs)} recordings" if len(recs) > 1 else "") + " …", flush=True)
+    cal = calibrate(model, recs if len(recs) > 1 else recs[0], free=free, energy=args.energy, substeps=args.substeps, method=args.method)
     out = Path(args.out)
     write_urdf(cal.model, out / "model.urdf")
     write_text_atomic(out / "calibration.json", json.dumps(cal.to_dict(), indent=2))

@@ -20,6 +20,12 @@ what it does:
   With --other, an effect that is strong by ΔBIC but smaller than that model-form error is
   accepted only if it predicts the first such --other recording better by more than the noise.
 
+several recordings of the same system (--also): fitted together, one model for all, each
+  followed from its own state (joined end to end with a pause the fits do not cross), each with
+  its own held-out last part; windows and plots are on the joined time axis (the summary gives
+  where each recording starts).  What one recording cannot determine another may: a free swing
+  fixes no inertia scale, a push does.  Unlike --other, these recordings shape the fit.
+
 on a reconstruction (first argument = a folder written by `kinemaforge reconstruct SEQ -o R`):
   the joint-space recording is built from it: q per time step from R/tracks.csv (the part
   tracks, measured against the joint axes of R/model.urdf) and tau from SEQ/wrenches.csv mapped
@@ -36,6 +42,7 @@ outputs: OUT/diagnosis.json, OUT/model.urdf, OUT/residual_time.png, OUT/residual
 
 examples:
   kinemaforge diagnose models/furuta/furuta.urdf qube.csv -o out/qube
+  kinemaforge diagnose models/furuta/furuta.urdf qube1.csv --also qube2.csv --other qube3.csv -o out/q
   kinemaforge reconstruct seq -o out/rec && kinemaforge diagnose out/rec --sequence seq -o out/diag
 """
 
@@ -62,6 +69,8 @@ def register(sub) -> None:
                    help="fit and predict in segments of S seconds (long oscillating recordings)")
     p.add_argument("--max-effects", type=int, default=None, metavar="N",
                    help="stop the selection after N effects (default: physics.selection.MAX_EFFECTS)")
+    p.add_argument("--also", nargs="+", default=(), metavar="CSV",
+                   help="further recordings of the same system, fitted together with RECORDING.csv (see below)")
     p.add_argument("--other", nargs="*", default=(), metavar="CSV",
                    help="further recordings of the same system: compared before/after; under model-form error "
                         "the first one with signal also judges acceptance (see below)")
@@ -85,7 +94,7 @@ def run(args) -> int:
     from ..physics.diagnose import diagnose
     from ..physics.report import write_diagnosis
 
-    from ..nlp.joint_space import fit_span, match_recording
+    from ..nlp.joint_space import fit_spans, join_recordings, match_recording
 
     model, rec, reconstructed = _inputs(args)
     nominal = model
@@ -93,7 +102,8 @@ def run(args) -> int:
         from ..verify.reconstruction import open_limits
 
         model = open_limits(model)
-    fit_span(model, rec)  # bad input fails before any work (and before the progress bar)
+    recs = [rec] + [read_recording(p) for p in args.also]
+    join_recordings(fit_spans(model, recs)[0])  # bad input fails before any work (and before the progress bar)
     bar = tqdm(desc="diagnose", unit="fit", leave=False)
 
     def progress(msg: str) -> None:
@@ -103,7 +113,7 @@ def run(args) -> int:
     others = tuple(read_recording(p) for p in args.other)
     for other in others:
         match_recording(model, other)
-    d = diagnose(model, rec, holdout_fraction=args.holdout, progress=progress, segment_s=args.segment,
+    d = diagnose(model, recs if len(recs) > 1 else rec, holdout_fraction=args.holdout, progress=progress, segment_s=args.segment,
                  other_recordings=others, max_effects=args.max_effects or MAX_EFFECTS, workers=args.workers)
     bar.close()
     if reconstructed:

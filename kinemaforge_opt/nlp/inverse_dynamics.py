@@ -8,6 +8,7 @@ alternative to output-error collocation (:mod:`kinemaforge_opt.nlp.joint_space`)
    (v = d/dt of the filtered q when v is not recorded).  Default cutoff: :func:`motion_cutoff_hz`.
    ``trim_s`` is dropped at each end (filter transients) and the rest decimated to at most
    ``max_samples`` samples (the filter removed everything above the new Nyquist frequency).
+   A recording with gaps (several joined end to end) is filtered and trimmed per stretch.
 2. **Residual.**  r_k = tau_model(q_k, v_k, a_k; theta, phi) − tau_k, with
    tau_model = RNEA(q, v, a; theta) (the native bridge, armature included) − passive(q, v; phi),
    passive = −damping·v − coulomb·tanh(v/eps) + bias (the effect library's laws with its default
@@ -58,7 +59,7 @@ from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..physics.effects import EFFECTS
 from ..symbolic import build_dynamics
-from .joint_space import active_effects, data_scales
+from .joint_space import active_effects, data_scales, stretches
 from .parameters import make_block
 from .problem import Problem
 from .sensitivity import ar1_inflation
@@ -152,15 +153,26 @@ def motion_cutoff_hz(rec: Recording, factor: float = 8.0, power: float = 0.99) -
 
 def filtered_states(rec: Recording, cutoff_hz: float) -> tuple[np.ndarray, ...]:
     """(q, v, a, tau), each (T, n): zero-phase 4th-order Butterworth at ``cutoff_hz`` [Hz] on q,
-    v (or d/dt q) and tau; a = d/dt of the filtered v [rad/s²]."""
+    v (or d/dt q) and tau; a = d/dt of the filtered v [rad/s²].  Each stretch between gaps in the
+    recording (:func:`~kinemaforge_opt.nlp.joint_space.stretches`; e.g. recordings joined end to
+    end) on its own; one too short for the filter's edge padding is kept unfiltered (the fit's
+    trim at each stretch's ends leaves it out)."""
     fs = 1.0 / rec.dt
     if not 0 < cutoff_hz < fs / 2:
         raise DataError(f"cutoff {cutoff_hz} Hz must lie between 0 and the Nyquist frequency {fs / 2} Hz")
     sos = scipy.signal.butter(4, cutoff_hz, fs=fs, output="sos")
-    f = lambda x: scipy.signal.sosfiltfilt(sos, x, axis=0)  # noqa: E731
-    q = f(rec.q)
-    v = f(rec.v) if rec.v is not None else np.gradient(q, rec.t, axis=0)
-    return q, v, np.gradient(v, rec.t, axis=0), f(rec.tau)
+    tau = rec.tau if rec.tau is not None else np.zeros_like(rec.q)
+    out = [np.array(rec.q, dtype=float), np.zeros_like(rec.q), np.zeros_like(rec.q), np.array(tau, dtype=float)]
+    for i, j in stretches(rec.t):
+        if j - i <= 3 * (2 * len(sos) + 1):  # sosfiltfilt's default edge padding
+            continue
+        t = rec.t[i:j]
+        f = lambda x: scipy.signal.sosfiltfilt(sos, x, axis=0)  # noqa: E731
+        q = f(rec.q[i:j])
+        v = f(rec.v[i:j]) if rec.v is not None else np.gradient(q, t, axis=0)
+        for k, x in enumerate((q, v, np.gradient(v, t, axis=0), f(tau[i:j]))):
+            out[k][i:j] = x
+    return tuple(out)
 
 
 def _check_inputs(model: ArticulatedModel, recording: Recording) -> Recording:
@@ -232,7 +244,8 @@ def calibrate_inverse_dynamics(
     free = _free_parameters(model, free, effects)
     cutoff = motion_cutoff_hz(rec) if cutoff_hz is None else float(cutoff_hz)
     qf, vf, af, tauf = filtered_states(rec, cutoff)
-    inside = np.flatnonzero((rec.t >= rec.t[0] + trim_s) & (rec.t <= rec.t[-1] - trim_s))
+    inside = np.flatnonzero(np.any([(rec.t >= rec.t[i] + trim_s) & (rec.t <= rec.t[j - 1] - trim_s)
+                                    for i, j in stretches(rec.t)], axis=0))
     if inside.size < 10:
         raise DataError(f"recording of {rec.t[-1] - rec.t[0]:.3g} s is too short for inverse-dynamics calibration")
     keep = inside[:: max(1, int(np.ceil(inside.size / max_samples)))]

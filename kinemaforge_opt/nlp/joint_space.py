@@ -23,6 +23,7 @@ small and JIT compilation is an option (FACTS.md).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import casadi as ca
@@ -100,6 +101,7 @@ SPIKE_ECHO = 0.2    # ...whose neighbours are off theirs by half that, the other
 
 
 GAP_INTERVALS = 5.0  # a sample interval this many times the median one is a gap in the recording
+JOIN_GAP_S = 1.0  # the least pause [s] between recordings joined end to end (join_recordings)
 
 
 def recording_gaps(t: np.ndarray) -> np.ndarray:
@@ -108,6 +110,13 @@ def recording_gaps(t: np.ndarray) -> np.ndarray:
     interpolated across), so fits and predictions do not carry the dynamics across a gap."""
     dt = np.diff(np.asarray(t, dtype=float))
     return np.flatnonzero(dt > GAP_INTERVALS * np.median(dt)) if dt.size else np.zeros(0, dtype=int)
+
+
+def stretches(t: np.ndarray) -> list[tuple[int, int]]:
+    """The [start, end) sample ranges of the stretches of a recording between its gaps
+    (:func:`recording_gaps`), in order."""
+    bounds = [0, *(recording_gaps(t) + 1), len(t)]
+    return list(zip(bounds[:-1], bounds[1:]))
 
 
 def without_spikes(rec: Recording) -> tuple[Recording, dict[str, list[float]]]:
@@ -213,6 +222,71 @@ def fit_span(model: ArticulatedModel, recording: Recording) -> tuple[Recording, 
                      f"{whole.t[-1] - whole.t[0]:.3g}-s recording was fitted: the rest is a joint pressed on, or "
                      "reaching, a stop the model declares, whose force the model has no law for")
     return rec, tuple(notes)
+
+
+def fit_spans(model: ArticulatedModel, recordings: Recording | Sequence[Recording]
+              ) -> tuple[list[Recording], tuple[str, ...]]:
+    """:func:`fit_span` of one recording or of each of several (its words then begin "recording
+    k:", 1-based): ([span, ...], what was left out in words)."""
+    recs = (recordings,) if isinstance(recordings, Recording) else tuple(recordings)
+    if not recs:
+        raise DataError("no recording given")
+    spans, notes = [], []
+    for k, r in enumerate(recs):
+        span, words = fit_span(model, r)
+        spans.append(span)
+        notes += [f"recording {k + 1}: {w}" if len(recs) > 1 else w for w in words]
+    return spans, tuple(notes)
+
+
+def join_recordings(recordings: Sequence[Recording]) -> Recording:
+    """Several recordings of the same system as one, end to end on one time axis: each shifted to
+    start JOIN_GAP_S (or 2·GAP_INTERVALS of its intervals, if longer) after the one before ends.
+    That pause is a gap (:func:`recording_gaps`), so fits, predictions and derivatives restart
+    there: each recording is followed from its own state, one model for all.  One recording is
+    returned as it is.  The joints must be the same and in the same order, the sample rates within
+    a factor of 2 (a gap is counted in median intervals), velocities recorded in all or in none; a
+    recording without applied forces beside others with them is driven by nothing (0)."""
+    first = recordings[0]
+    if len(recordings) == 1:
+        return first
+    rates = [1.0 / r.dt for r in recordings]
+    for k, r in enumerate(recordings[1:], start=2):
+        if r.joint_names != first.joint_names:
+            raise DataError(f"recording {k} has joints {list(r.joint_names)}, recording 1 {list(first.joint_names)}: "
+                            "recordings fitted together must record the same joints")
+        if (r.v is None) != (first.v is None):
+            raise DataError(f"recording {k} {'has no' if r.v is None else 'has'} velocities v:<joint> and recording 1 "
+                            f"{'has' if r.v is None else 'has none'}: give them for all recordings or for none")
+    if max(rates) > 2.0 * min(rates):
+        k_lo, k_hi = int(np.argmin(rates)) + 1, int(np.argmax(rates)) + 1
+        raise DataError(f"recording {k_hi} is sampled at {max(rates):.4g} Hz and recording {k_lo} at "
+                        f"{min(rates):.4g} Hz: recordings fitted together must be sampled within a factor of 2 "
+                        "(resample one first)")
+    pause = max(JOIN_GAP_S, 2.0 * GAP_INTERVALS * max(r.dt for r in recordings))
+    shifts, end = [], None
+    for r in recordings:
+        shifts.append(0.0 if end is None else end + pause - r.t[0])
+        end = r.t[-1] + shifts[-1]
+    forced = any(r.tau is not None for r in recordings)
+
+    def stack(field):
+        parts = [getattr(r, field) for r in recordings]
+        if field == "tau" and forced:
+            parts = [np.zeros_like(r.q) if a is None else a for r, a in zip(recordings, parts)]
+        return None if parts[0] is None else np.concatenate(parts)
+
+    t = np.concatenate([r.t + s for r, s in zip(recordings, shifts)])
+    return Recording(t, first.joint_names, stack("q"), stack("v"), stack("tau"))
+
+
+def joined_words(spans: Sequence[Recording], joined: Recording) -> str:
+    """The sentence that says where each of several recordings lies on the joined time axis."""
+    firsts = np.cumsum([0] + [r.t.size for r in spans[:-1]])
+    starts = joined.t[firsts]
+    where = ", ".join(f"{k + 1} at {a - joined.t[0]:.4g} s" for k, a in enumerate(starts))
+    return (f"{len(spans)} recordings fitted together (one model for all, each followed from its own state); "
+            f"on the fit's time axis recording {where}")
 
 
 def check_units(model: ArticulatedModel, rec: Recording) -> None:

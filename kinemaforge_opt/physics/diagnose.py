@@ -57,6 +57,7 @@ of :mod:`.search`, ranked and started by :mod:`.prescreen`); 4 in :mod:`.predict
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -65,7 +66,15 @@ from ..calibration import Calibration
 from ..errors import DataError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
-from ..nlp.joint_space import fit_span, friction_smoothing, match_recording, measurement_sigma, noise_std
+from ..nlp.joint_space import (
+    fit_spans,
+    friction_smoothing,
+    join_recordings,
+    joined_words,
+    match_recording,
+    measurement_sigma,
+    noise_std,
+)
 from .locate import THRESHOLD_SIGMA, JointMismatch, block_means, locate
 from .predict import TOO_SPARSE, HeldOut, predict_before_after
 from .selection import CANDIDATES, DELTA_BIC, MAX_EFFECTS, SCREEN, EffectSearch, FoundEffect, span_words
@@ -186,7 +195,7 @@ class Diagnosis:
             if check.get(key):
                 lines.append(f"({check[key]})")
         lines += [f"({t['identifiability']})" for t in self.tested if "identifiability" in t]
-        lines += [f"({t['left_out']})" for t in self.tested if "left_out" in t]
+        lines += [f"({t[key]})" for key in ("joined", "left_out") for t in self.tested if key in t]
         if not self.effects and self.segment_s is None and any(t.get("status") == CPU_CAP_STATUS for t in self.tested):
             lines.append("(the recording was fitted as one trajectory: a long recording of a sensitive system, such "
                          "as a swinging pendulum, may fit only in pieces; try segment_s=1, `--segment 1`)")
@@ -200,17 +209,31 @@ def search_decimation(rec: Recording) -> int:
 
 
 def block_average(rec: Recording, k: int) -> Recording:
-    """``rec`` as means over consecutive blocks of ``k`` samples (t, q, v and tau alike; a last
-    incomplete block is dropped).  k = 1 returns ``rec`` itself."""
+    """``rec`` as means over consecutive blocks of ``k`` samples (t, q, v and tau alike; each
+    stretch between gaps on its own, its last incomplete block dropped).  k = 1 returns ``rec``."""
     if k <= 1:
         return rec
-    return Recording(block_means(rec.t, k), rec.joint_names, block_means(rec.q, k), block_means(rec.v, k),
-                     block_means(rec.tau, k))
+
+    def mean(a):
+        return block_means(a, k, rec.t)
+
+    return Recording(mean(rec.t), rec.joint_names, mean(rec.q), mean(rec.v), mean(rec.tau))
+
+
+def _split(rec: Recording, holdout_fraction: float, k: int | None) -> tuple[Recording, Recording | None]:
+    """(the fit part, the held-out last ``holdout_fraction`` or None if under 4 samples) of the
+    fit span ``rec`` (recording ``k``, 0-based, of several; None: the only one)."""
+    split = int(round(rec.t.size * (1 - holdout_fraction)))
+    if split < 10:
+        which = "recording" if k is None else f"recording {k + 1}"
+        raise DataError(f"{which} has {rec.t.size} samples: too few to fit and hold out {holdout_fraction:.0%}")
+    return rec.window(rec.t[0], rec.t[split - 1]), (rec.window(rec.t[split], rec.t[-1]) if split < rec.t.size - 3
+                                                     else None)
 
 
 def diagnose(
     model: ArticulatedModel,
-    recording: Recording,
+    recording: Recording | Sequence[Recording],
     holdout_fraction: float = 0.25,
     candidates: tuple[str, ...] = CANDIDATES,
     max_effects: int = MAX_EFFECTS,
@@ -222,8 +245,11 @@ def diagnose(
 ) -> Diagnosis:
     """Locate, explain, model and show the mismatch between ``model`` and ``recording``.
 
-    holdout_fraction: the last part of the recording kept out of every fit and used to compare
-    predictions before vs after.  candidates: effect types to test (DESIGN.md names).
+    recording: one recording, or several of the same system fitted together (one model for all,
+    each followed from its own state: :func:`~kinemaforge_opt.nlp.joint_space.join_recordings`;
+    the fits, windows and plots are then on the joined time axis, which the summary gives).
+    holdout_fraction: the last part of the recording (of each) kept out of every fit and used to
+    compare predictions before vs after.  candidates: effect types to test (DESIGN.md names).
     progress: optional callable(str) receiving one line per stage.
     segment_s: fit in segments of this length [s] (see ``nlp.joint_space``), and predict held-out
     data segment by segment from each segment's first state; use it for long oscillating
@@ -239,17 +265,16 @@ def diagnose(
     other threads may be inside CasADi or hold a lock the fits need while this runs.
     """
     say = progress or (lambda s: None)
-    rec, left_out = fit_span(model, recording)
+    spans, left_out = fit_spans(model, recording)
     unknown = [c for c in candidates if c not in CANDIDATES]
     if unknown:
         raise DataError(f"unknown candidate effect(s) {unknown}; available: {', '.join(CANDIDATES)}")
     if workers is not None and workers < 1:
         raise DataError(f"workers={workers}: the hypothesis fits need at least one process")
-    split = int(round(rec.t.size * (1 - holdout_fraction)))
-    if split < 10:
-        raise DataError(f"recording has {rec.t.size} samples: too few to fit and hold out {holdout_fraction:.0%}")
-    fit_rec = rec.window(rec.t[0], rec.t[split - 1])
-    held = rec.window(rec.t[split], rec.t[-1]) if split < rec.t.size - 3 else None
+    fits, helds = zip(*(_split(r, holdout_fraction, k if len(spans) > 1 else None) for k, r in enumerate(spans)))
+    fit_rec = join_recordings(fits)
+    held = join_recordings([h for h in helds if h is not None]) if any(h is not None for h in helds) else None
+    joined = ({"joined": joined_words(fits, fit_rec)},) if len(spans) > 1 else ()
     sigma_q = measurement_sigma(fit_rec.q)
     # The hypothesis search runs on a coarser copy of the fit span (effects are low-bandwidth):
     # block means at SEARCH_RATE_HZ or more, with their own noise level; only the nominal and
@@ -279,7 +304,7 @@ def diagnose(
     for k, other in enumerate(other_recordings):
         say(f"predicting other recording {k + 1}/{len(other_recordings)}")
         others.append(predict_before_after(model, final.model, match_recording(model, other), segment_s))
-    tested = tuple({"left_out": words} for words in left_out) + tuple(search.tested)
+    tested = joined + tuple({"left_out": words} for words in left_out) + tuple(search.tested)
     return Diagnosis(tuple(mismatch), tuple(found), tested, nominal, final, final.model, held_out, tuple(others),
                      held_out_used_for_selection=judged_by_held_out, acceptance_check=acceptance,
                      dropped=search.dropped, segment_s=segment_s)

@@ -17,7 +17,7 @@ from scipy.signal import savgol_filter
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..model.pinocchio import inverse_dynamics
-from ..nlp.joint_space import recording_gaps
+from ..nlp.joint_space import stretches
 
 THRESHOLD_SIGMA = 3.0  # a window is flagged when its running RMS exceeds this many noise sigmas
 # Savitzky–Golay window of the derivatives [s] ...
@@ -46,11 +46,16 @@ class JointMismatch:
     regions: dict[str, float]
 
 
-def block_means(a: np.ndarray | None, k: int) -> np.ndarray | None:
+def block_means(a: np.ndarray | None, k: int, t: np.ndarray | None = None) -> np.ndarray | None:
     """Means of (T, ...) ``a`` over consecutive blocks of ``k`` samples (a last incomplete block
-    is dropped); None stays None."""
+    is dropped); None stays None.  With the sample times ``t`` (T,), no block straddles a gap in
+    the recording: each stretch between gaps (:func:`~kinemaforge_opt.nlp.joint_space.stretches`)
+    is averaged on its own (a mean across a gap is a sample of nothing recorded)."""
     if a is None or k <= 1:
         return a
+    if t is not None:
+        parts = [block_means(a[i:j], k) for i, j in stretches(t)]
+        return np.concatenate(parts) if parts else a[:0]
     T = (len(a) // k) * k
     return a[:T].reshape(T // k, k, *a.shape[1:]).mean(axis=1)
 
@@ -68,8 +73,7 @@ def smooth_derivatives(rec: Recording, window_s: float | None = None) -> tuple[n
     dt = rec.dt
     w = max(7, int(round((window_s or DERIVATIVE_WINDOW_S) / dt)) | 1)
     q, v, a = np.array(rec.q, dtype=float), np.zeros_like(rec.q), np.zeros_like(rec.q)
-    starts = [0, *(recording_gaps(rec.t) + 1), rec.t.size]
-    for i, j in zip(starts[:-1], starts[1:]):
+    for i, j in stretches(rec.t):
         ww = min(w, (j - i) - 1 + (j - i) % 2)  # the longest odd window the stretch holds
         if ww < 5:  # too short for a cubic: kept as recorded, at rest
             continue
@@ -100,7 +104,7 @@ def inverse_dynamics_residual(model: ArticulatedModel, rec: Recording, window_s:
     q, v, a = smooth_derivatives(rec, window_s)
     tau = rec.tau if rec.tau is not None else np.zeros_like(q)
     r = inverse_dynamics(model, q, v, a) - tau - model.passive_forces(q, v)
-    return block_means(r, block), block_means(q, block), block_means(v, block), block_means(a, block)
+    return tuple(block_means(x, block, rec.t) for x in (r, q, v, a))
 
 
 def _windows(t: np.ndarray, flagged: np.ndarray, min_gap_s: float) -> tuple[tuple[float, float], ...]:

@@ -305,7 +305,7 @@ class EffectSearch:
         block = max(1, int(round(srch.dt / fit_rec.dt)))
         self.r_nom, self.q_s, self.v_s, a_s = inverse_dynamics_residual(model, fit_rec, motion_window(fit_rec), block)
         self.id_force = inertia_columns(model, self.q_s, self.v_s, a_s,
-                                        block_means(fit_rec.tau, block) if self.forced else None)
+                                        block_means(fit_rec.tau, block, fit_rec.t) if self.forced else None)
         self.nominal_model = _model_of(model, self.nominal_trial, self.stops)
         self.n_res = srch.q.size
         # The prediction gate's judge (``prediction_gate``): the first other recording whose

@@ -43,3 +43,13 @@ def test_block_means_average_whole_blocks():
     np.testing.assert_allclose(block_means(a, 3), [[2.0, 3.0], [8.0, 9.0]])
     assert block_means(a, 1) is a and block_means(None, 3) is None
 
+
+
+def test_block_means_do_not_straddle_a_gap():
+    """Samples 0–4 and 5–9 of a log that paused between them: blocks of 2 are taken within each
+    stretch (the last incomplete one dropped); a block across the pause would be a sample of
+    nothing recorded."""
+    t = np.concatenate([np.arange(5.0), 20.0 + np.arange(5.0)])
+    a = t[:, None] * 10.0
+    np.testing.assert_allclose(block_means(t, 2, t), [0.5, 2.5, 20.5, 22.5])
+    np.testing.assert_allclose(block_means(a, 2, t)[:, 0], [5.0, 25.0, 205.0, 225.0])
