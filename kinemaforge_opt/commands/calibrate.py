@@ -8,7 +8,8 @@ import json
 EPILOG = """\
 parameter names (--free, comma separated):
   <joint>.damping  .coulomb  .stribeck  .v_stribeck  .spring_stiffness  .spring_rest
-  <joint>.bias  .drag  .axis  .origin  .pitch  .armature      <link>.inertia      gravity
+  <joint>.bias  .drag  .axis  .origin  .pitch  .armature
+  <link>.inertia (10 inertial parameters)  <link>.inertia_ratio (one scale of them)  gravity
 default: <joint>.damping and <joint>.coulomb for every joint in the model.
 
 several recordings of the same system (--also): fitted together, one model for all, each
@@ -19,7 +20,7 @@ They must record the same joints at sample rates within a factor of 2.
 examples:
   kinemaforge calibrate models/laptop/laptop.urdf rec.csv -o out/cal \\
       --free hinge.axis,hinge.damping,hinge.coulomb,hinge.spring_stiffness,hinge.spring_rest
-  kinemaforge calibrate door.urdf swing.csv --also push.csv -o out/cal --free hinge.damping,rod.inertia
+  kinemaforge calibrate door.urdf swing.csv --also push.csv -o out/cal --free hinge.damping,rod.inertia_ratio
 """
 
 
