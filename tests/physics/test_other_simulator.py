@@ -418,18 +418,25 @@ def test_a_pendulum_spinning_over_the_top_recorded_as_a_wrapped_angle_is_unwrapp
                                                                            rel=0.05), d.summary()
 
 
+def _pushed_into_its_stop(category: str, damping: float):
+    """The diagnosis of a Drake recording (discrete plant, the URDF's own limits as its stops) of
+    the one-joint object of ``category`` with ``damping``, started a tenth of its range below its
+    upper stop: the first push drives it into that stop, the hand draws it back after 3 s."""
+    model, joint, _, forcing = _pushed(category, RECORD_HZ)
+    lim = joint.limits
+    q0 = np.array([lim.upper - 0.1 * (lim.upper - lim.lower)])
+    truth = model.with_joint(joint.name, dynamics=JointDynamics(damping=damping))
+    motion = simulate_at(truth, q0, np.zeros(1), forcing.t, tau=forcing, discrete=True)
+    q = motion.q + np.random.default_rng(0).normal(0.0, NOISE[category], motion.q.shape)
+    return diagnose(model, Recording(forcing.t, model.joint_names, q, tau=forcing.tau))
+
+
 def test_a_door_driven_against_its_declared_stop_first_is_read_after_it_leaves():
     """The door starts near the stop its URDF declares (Drake's discrete plant holds it there) and
     the first push drives it into it; only after 3 s does the hand draw it back.  Read up to the
     first arrival (under a second), the recording showed nothing; the longest stretch clear of
     the stops is read instead."""
-    model, joint, _, forcing = _pushed("cabinet", RECORD_HZ)
-    lim = joint.limits
-    q0 = np.array([lim.upper - 0.1 * (lim.upper - lim.lower)])
-    truth = model.with_joint(joint.name, dynamics=JointDynamics(damping=0.4))
-    motion = simulate_at(truth, q0, np.zeros(1), forcing.t, tau=forcing, discrete=True)
-    q = motion.q + np.random.default_rng(0).normal(0.0, NOISE["cabinet"], motion.q.shape)
-    d = diagnose(model, Recording(forcing.t, model.joint_names, q, tau=forcing.tau))
+    d = _pushed_into_its_stop("cabinet", 0.4)
     assert {e.type: e.value for e in d.effects} == pytest.approx({"viscous_damping": 0.4}, rel=0.02), d.summary()
     assert "only 3.07–7 s of the 7-s recording was fitted" in d.summary()
 
@@ -439,11 +446,5 @@ def test_a_heavy_drawers_short_stroke_gets_its_damping_not_friction_and_drag():
     stroke and a halt are left to read.  Over it damping, Coulomb friction and quadratic drag are
     nearly the same force, and the linear pre-screen ranked the damping sixth: Coulomb friction
     0.09 + drag 22.7 were reported for a damping of 3.0.  A one-joint round is fitted whole."""
-    model, joint, _, forcing = _pushed("drawer", RECORD_HZ)
-    lim = joint.limits
-    q0 = np.array([lim.upper - 0.1 * (lim.upper - lim.lower)])
-    truth = model.with_joint(joint.name, dynamics=JointDynamics(damping=3.0))
-    motion = simulate_at(truth, q0, np.zeros(1), forcing.t, tau=forcing, discrete=True)
-    q = motion.q + np.random.default_rng(0).normal(0.0, NOISE["drawer"], motion.q.shape)
-    d = diagnose(model, Recording(forcing.t, model.joint_names, q, tau=forcing.tau))
+    d = _pushed_into_its_stop("drawer", 3.0)
     assert {e.type: e.value for e in d.effects} == pytest.approx({"viscous_damping": 3.0}, rel=0.02), d.summary()
