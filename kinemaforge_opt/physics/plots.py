@@ -58,8 +58,8 @@ def plot_diagnosis(d: Diagnosis, out_dir: str | Path) -> list[Path]:
 
     fig, axes = plt.subplots(n, 1, figsize=(9, 2.6 * n), squeeze=False)
     for k, (ax, m) in enumerate(zip(axes[:, 0], d.mismatch)):
-        ax.plot(rec.t, nom.q_fit[:, k] - rec.q[:, k], lw=1, label="nominal fit − recorded")
-        ax.plot(rec.t, d.final_fit.q_fit[:, k] - rec.q[:, k], lw=1, label="augmented fit − recorded")
+        ax.plot(rec.t, _broken(rec.t, nom.q_fit[:, k] - rec.q[:, k]), lw=1, label="nominal fit − recorded")
+        ax.plot(rec.t, _broken(rec.t, d.final_fit.q_fit[:, k] - rec.q[:, k]), lw=1, label="augmented fit − recorded")
         for a, b in m.windows_s:
             ax.axvspan(a, b, color="red", alpha=0.12)
         ax.set_ylabel(f"{names[k]} error")
