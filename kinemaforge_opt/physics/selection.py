@@ -895,31 +895,24 @@ class EffectSearch:
         the output error is dominated by model-form error the library cannot express, and its
         likelihood is no longer evidence for specific effects: the selection must then also
         predict data outside the fit better than the nominal model, else effects are dropped as
-        in the simulation check.  That data is whichever errs more under the nominal model, by
-        more than THRESHOLD_SIGMA noise sigmas: the held-out span ``held`` or the first other
-        recording that does (a span that errs less shows nothing an effect could predict better,
-        e.g. a system come to rest; one that errs by barely that, such as the slow ends of the
-        Qube's swings, cannot show a gain above the noise either, and had all effects of two
-        recordings fitted together dropped).  The span used is then no longer independent (the
-        summary and diagnosis.json say which).  If no span carries such a signal the check is
-        skipped, and said so."""
+        in the simulation check.  That data is the held-out span ``held`` if the nominal model's
+        prediction of it errs by more than THRESHOLD_SIGMA noise sigmas (else it shows nothing an
+        effect could predict better, e.g. a system come to rest), otherwise the first other
+        recording that does; the span used is then no longer independent (the summary and
+        diagnosis.json say which).  If no span carries such a signal the check is skipped, and
+        said so."""
         floor_final = float(np.sqrt(self.rss(self.current) / self.n_res))
         acceptance, judged_by_held_out = None, False
         if self.selected and floor_final > THRESHOLD_SIGMA:
             spans = ([("held_out", held)] if held is not None else []) + \
                 [(f"other_recording_{k + 1}", match_recording(self.model, o)) for k, o in enumerate(self.other_recordings)]
-            signal, judges = {}, {}
+            signal = {}
             for name, span in spans:
                 self.say(f"checking whether the {span_words(name)} can judge the effects")
                 h = predict_before_after(self.nominal_model, self.model_of(self.current), span, self.segment_s)
                 signal[name] = prediction_signal(h, self.sigma_q)
-                if signal[name] >= THRESHOLD_SIGMA:
-                    judges[name] = (span, h)
-                    if name != "held_out":  # the first other recording with signal
-                        break
-            if judges:
-                name = max(judges, key=signal.get)
-                span, h = judges[name]
+                if signal[name] < THRESHOLD_SIGMA:
+                    continue
                 judged_by_held_out = name == "held_out"
                 acceptance = {"span": name, "signal_sigma": signal, "fit_rms_sigma": floor_final, "reason": (
                     f"the fit stays {floor_final:.0f}x the noise whatever effect is added — model-form error the effect "
@@ -927,6 +920,7 @@ class EffectSearch:
                     f"better (its nominal prediction errs by {signal[name]:.0f} sigma): that span is not independent here")}
                 self.drop_until_better(span, self.segment_s, "acceptance_check", "prediction_rms",
                                        f"checking {{n}} effect(s) on the {span_words(name)}", "acceptance_check", first=h)
+                break
             else:
                 acceptance = {"span": None, "signal_sigma": signal, "fit_rms_sigma": floor_final, "reason": (
                     f"the fit stays {floor_final:.0f}x the noise, but no span outside the fit ("
