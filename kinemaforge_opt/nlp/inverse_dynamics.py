@@ -155,14 +155,13 @@ def filtered_states(rec: Recording, cutoff_hz: float) -> tuple[np.ndarray, ...]:
     """(q, v, a, tau), each (T, n): zero-phase 4th-order Butterworth at ``cutoff_hz`` [Hz] on q,
     v (or d/dt q) and tau; a = d/dt of the filtered v [rad/s²].  Each stretch between gaps in the
     recording (:func:`~kinemaforge_opt.nlp.joint_space.stretches`; e.g. recordings joined end to
-    end) on its own; one too short for the filter's edge padding is kept unfiltered (the fit's
-    trim at each stretch's ends leaves it out)."""
+    end) on its own; one too short for the filter's edge padding is NaN (left out of the fit)."""
     fs = 1.0 / rec.dt
     if not 0 < cutoff_hz < fs / 2:
         raise DataError(f"cutoff {cutoff_hz} Hz must lie between 0 and the Nyquist frequency {fs / 2} Hz")
     sos = scipy.signal.butter(4, cutoff_hz, fs=fs, output="sos")
     tau = rec.tau if rec.tau is not None else np.zeros_like(rec.q)
-    out = [np.array(rec.q, dtype=float), np.zeros_like(rec.q), np.zeros_like(rec.q), np.array(tau, dtype=float)]
+    out = [np.full(rec.q.shape, np.nan) for _ in range(4)]
     for i, j in stretches(rec.t):
         if j - i <= 3 * (2 * len(sos) + 1):  # sosfiltfilt's default edge padding
             continue
@@ -236,7 +235,7 @@ def calibrate_inverse_dynamics(
     each end; slow_fraction: samples where |v_j| is below this fraction of joint j's RMS speed are
     left out of joint j's residual (friction there is the real joint's stiction or creep, not the
     sign law, and filtered torques smear its jump).  The returned :class:`Calibration` has
-    ``q_fit``/``v_fit`` = the filtered states (T, n) and ``rms_q`` = per-joint RMS torque residual on the fitting samples [N·m] (there is no
+    ``q_fit``/``v_fit`` = the filtered states (T, n; NaN on a stretch between gaps too short to filter) and ``rms_q`` = per-joint RMS torque residual on the fitting samples [N·m] (there is no
     output error in q in this method).  Raises for bad input before any work starts.
     """
     start = time.perf_counter()
@@ -245,7 +244,7 @@ def calibrate_inverse_dynamics(
     cutoff = motion_cutoff_hz(rec) if cutoff_hz is None else float(cutoff_hz)
     qf, vf, af, tauf = filtered_states(rec, cutoff)
     inside = np.flatnonzero(np.any([(rec.t >= rec.t[i] + trim_s) & (rec.t <= rec.t[j - 1] - trim_s)
-                                    for i, j in stretches(rec.t)], axis=0))
+                                    for i, j in stretches(rec.t)], axis=0) & np.isfinite(qf).all(axis=1))
     if inside.size < 10:
         raise DataError(f"recording of {rec.t[-1] - rec.t[0]:.3g} s is too short for inverse-dynamics calibration")
     keep = inside[:: max(1, int(np.ceil(inside.size / max_samples)))]
