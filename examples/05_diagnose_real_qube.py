@@ -38,7 +38,7 @@ def main() -> None:
     rec = load(args.fit)
     together = [rec] + [load(k) for k in args.also]
     others = tuple(load(k) for k in args.others)
-    d = diagnose(model, together if args.also else rec, segment_s=1.0, other_recordings=others, progress=lambda s: print(f"  … {s}"))
+    d = diagnose(model, together, segment_s=1.0, other_recordings=others, progress=lambda s: print(f"  … {s}"))
     print(d.summary())
     paths = write_diagnosis(d, rec, args.out, with_drift=False)
     print("wrote " + ", ".join(str(p) for p in paths.values()))

@@ -51,7 +51,7 @@ def main() -> None:
         t0 = time.perf_counter()
         fitted = [k] + [(k - 1 + d) % FILES + 1 for d in a.together]
         recs = [load(f) for f in fitted]
-        d = diagnose(model, recs if len(recs) > 1 else recs[0], segment_s=1.0,
+        d = diagnose(model, recs, segment_s=1.0,
                      other_recordings=tuple(load(o) for o in others))
         wall = time.perf_counter() - t0
         cells = []

@@ -66,7 +66,7 @@ def run(args) -> int:
     join_recordings(fit_spans(model, recs)[0])  # names the joint or recording at fault before any work
     print(f"calibrating {sum(len(r.t) for r in recs)} samples × {len(recs[0].joint_names)} joints"
           + (f" from {len(recs)} recordings" if len(recs) > 1 else "") + " …", flush=True)
-    cal = calibrate(model, recs if len(recs) > 1 else recs[0], free=free, energy=args.energy, substeps=args.substeps, method=args.method)
+    cal = calibrate(model, recs, free=free, energy=args.energy, substeps=args.substeps, method=args.method)
     out = Path(args.out)
     write_urdf(cal.model, out / "model.urdf")
     write_text_atomic(out / "calibration.json", json.dumps(cal.to_dict(), indent=2))

@@ -113,7 +113,7 @@ def run(args) -> int:
     others = tuple(read_recording(p) for p in args.other)
     for other in others:
         match_recording(model, other)
-    d = diagnose(model, recs if len(recs) > 1 else rec, holdout_fraction=args.holdout, progress=progress, segment_s=args.segment,
+    d = diagnose(model, recs, holdout_fraction=args.holdout, progress=progress, segment_s=args.segment,
                  other_recordings=others, max_effects=args.max_effects or MAX_EFFECTS, workers=args.workers)
     bar.close()
     if reconstructed:

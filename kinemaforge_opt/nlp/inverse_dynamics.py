@@ -162,11 +162,11 @@ def filtered_states(rec: Recording, cutoff_hz: float) -> tuple[np.ndarray, ...]:
     sos = scipy.signal.butter(4, cutoff_hz, fs=fs, output="sos")
     tau = rec.tau if rec.tau is not None else np.zeros_like(rec.q)
     out = [np.full(rec.q.shape, np.nan) for _ in range(4)]
+    f = lambda x: scipy.signal.sosfiltfilt(sos, x, axis=0)  # noqa: E731
     for i, j in stretches(rec.t):
         if j - i <= 3 * (2 * len(sos) + 1):  # sosfiltfilt's default edge padding
             continue
         t = rec.t[i:j]
-        f = lambda x: scipy.signal.sosfiltfilt(sos, x, axis=0)  # noqa: E731
         q = f(rec.q[i:j])
         v = f(rec.v[i:j]) if rec.v is not None else np.gradient(q, t, axis=0)
         for k, x in enumerate((q, v, np.gradient(v, t, axis=0), f(tau[i:j]))):

@@ -273,7 +273,8 @@ def diagnose(
         raise DataError(f"workers={workers}: the hypothesis fits need at least one process")
     fits, helds = zip(*(_split(r, holdout_fraction, k if len(spans) > 1 else None) for k, r in enumerate(spans)))
     fit_rec = join_recordings(fits)
-    held = join_recordings([h for h in helds if h is not None]) if any(h is not None for h in helds) else None
+    held_parts = [h for h in helds if h is not None]
+    held = join_recordings(held_parts) if held_parts else None
     joined = ({"joined": joined_words(fits, fit_rec)},) if len(spans) > 1 else ()
     sigma_q = measurement_sigma(fit_rec.q)
     # The hypothesis search runs on a coarser copy of the fit span (effects are low-bandwidth):

@@ -732,7 +732,7 @@ class EffectSearch:
                 names = effect_parameters(model, joint, effect)
                 if not trial.success or _at_bound_values(trial, names, self.nominal_z):
                     continue
-                gain = n_res * np.log(self.rss(trial) / self.rss(self.current)) + (n_free_params(names) - k_old) * np.log(n_res)
+                gain = delta_bic(self.rss(trial), self.rss(self.current), n_free_params(names) - k_old, n_res)
                 if gain < DELTA_BIC:
                     swaps.append((gain, joint, effect, trial))
             swaps.sort(key=lambda x: x[0])
@@ -760,13 +760,12 @@ class EffectSearch:
         again = self.trial_of_parent(self.chosen(), trial)
         if not again.success or self.rss(again) >= self.rss(self.current):
             return swap
-        n_res = self.n_res
         k_new = n_free_params(effect_parameters(self.model, joint, effect))
-        gain_again = n_res * np.log(self.rss(trial) / self.rss(again)) + (k_new - k_old) * np.log(n_res)
+        gain_again = delta_bic(self.rss(trial), self.rss(again), k_new - k_old, self.n_res)
         self.tested.append({"parent_refit": [f"{e} on {j}" for j, e, _ in self.selected],
                             "from": f"{effect} on {joint} in place of {self.selected[i][1]}",
-                            "delta_bic_parent": float(n_res * np.log(self.rss(again) / self.rss(self.current))),
-                            "delta_bic": float(gain_again)})
+                            "delta_bic_parent": delta_bic(self.rss(again), self.rss(self.current), 0, self.n_res),
+                            "delta_bic": gain_again})
         self.say(f"the chosen effects fit better from the {effect} fit's start; the swap then gains ΔBIC "
                  f"{gain_again:.0f}")
         self.current = again
@@ -801,7 +800,7 @@ class EffectSearch:
             if keep and not trial.success:
                 continue
             k_old = n_free_params(effect_parameters(self.model, *self.selected[i][:2]))
-            cost = n_res * np.log(self.rss(self.current) / self.rss(trial)) + k_old * np.log(n_res)  # BIC(with) - BIC(without)
+            cost = delta_bic(self.rss(self.current), self.rss(trial), k_old, n_res)  # BIC(with) - BIC(without)
             if cost >= DELTA_BIC:
                 self.tested.append({"removed": f"{self.selected[i][1]} on {self.selected[i][0]}", "delta_bic": float(cost)})
                 self.say(f"removed {self.selected[i][1]} on {self.selected[i][0]} (ΔBIC of keeping it {cost:.0f})")
