@@ -44,6 +44,27 @@ def limit_stop_guess(model: ArticulatedModel, rec: Recording) -> dict[str, tuple
     return out
 
 
+# Where a stop's fit may start, in fractions of the recorded range inside the recorded extreme on
+# its side (:func:`stop_ramp_fraction`).
+STOP_START_FRACTIONS = (0.01, 0.02, 0.05, 0.1, 0.2)
+
+
+def stop_ramp_fraction(q: np.ndarray, r: np.ndarray, side: float, extreme: float) -> float:
+    """The fraction of the recorded range ``q`` (T,) inside ``extreme`` (on ``side``) at which a
+    stop's one-sided ramp of force, pushing back with the best stiffness >= 0, explains most of
+    the missing force ``r`` (T,) by least squares; one of :data:`STOP_START_FRACTIONS`.  The
+    residual force comes from smoothed accelerations, which spread an impact over the window,
+    so this is a start for the NLP, not an estimate."""
+    span = max(float(np.ptp(q)), 1e-12)
+
+    def left(f):
+        push = -side * np.maximum(side * (q - (extreme - side * f * span)), 0.0)  # force per unit stiffness
+        k = max(float(push @ r) / max(float(push @ push), 1e-300), 0.0)
+        return float(np.sum((r - k * push) ** 2))
+
+    return min(STOP_START_FRACTIONS, key=left)
+
+
 def inertia_columns(model: ArticulatedModel, q: np.ndarray, v: np.ndarray, a: np.ndarray,
                     tau: np.ndarray | None) -> np.ndarray:
     """(T, n) per joint, the pre-screen's column of an inertia error on it: the force its moved
@@ -140,12 +161,11 @@ def _columns(model: ArticulatedModel, joint: str, effect: str, q: np.ndarray, v:
     """Force columns (each (T,)) of ``effect`` on ``joint`` for the linear pre-screen: the effect's
     force per unit parameter (Stribeck at speed ``vs``, default a fifth of the RMS speed), the rigid-body force M a + h
     for an inertia ratio, gravity's sin q and cos q for a revolute axis tilt (a constant for a
-    prismatic one), a one-sided ramp from the stop guess for a limit contact."""
+    prismatic one), a one-sided ramp from the stop's start for a limit contact."""
     k = model.joint_index(joint)
     qk, vk = q[:, k], v[:, k]
     vs = 0.2 * v_scale[k] if vs is None else vs
     side, stop = stops[joint]
-    span = float(np.ptp(qk))
     if effect == "axis_tilt":
         return [np.ones_like(qk)] if model.joint(joint).type == "prismatic" else [np.sin(qk), np.cos(qk)]
     return {
@@ -153,7 +173,7 @@ def _columns(model: ArticulatedModel, joint: str, effect: str, q: np.ndarray, v:
         "constant_bias": [np.ones_like(vk)], "spring": [-qk, np.ones_like(qk)],
         "stribeck_friction": [_stribeck_column(vk, vs, eps[k])],
         "inertia_error": [id_force[:, k]],
-        "limit_contact": [np.maximum(side * (qk - (stop - side * 0.05 * span)), 0.0)],
+        "limit_contact": [np.maximum(side * (qk - stop), 0.0)],
     }[effect]
 
 
@@ -164,7 +184,8 @@ def screen_scores(model: ArticulatedModel, pending: list[tuple[str, str]], selec
     samples) that the already selected effects on that joint leave and the hypothesis removes
     too, by joint linear least squares on their force columns (:func:`_columns`; a Stribeck
     column at the speed of :func:`stribeck_speeds` that explains most); lower = explains
-    more.  A cheap ranking, not evidence: the chosen hypotheses are then fitted by the NLP."""
+    more.  ``stops``: per joint (side, position where a stop's ramp starts).  A cheap ranking,
+    not evidence: the chosen hypotheses are then fitted by the NLP."""
     out = {}
     for joint, effect in pending:
         k = model.joint_index(joint)

@@ -114,3 +114,17 @@ def test_a_swap_is_judged_against_the_chosen_effects_at_their_best():
     truth = {e.type: e.value for e in er.shown_effects}
     d = diagnose(er.model, er.recording)
     assert {e.type: e.value for e in d.effects} == pytest.approx(truth, rel=0.1), d.summary()
+
+
+def test_a_stiff_stop_barely_touched_is_found_where_it_is():
+    """The catalogue's drawer run into a 5000 N/m stop at 0.2 m (MuJoCo, noise seed 1, 30 Hz): it
+    presses 1.6 mm in, a few samples.  From its one start 5 % of the stroke inside the extreme the
+    stop's fit stalled at 0.172 m (ΔBIC −126 against the oracle's −902), a spring stood in for it,
+    the simulation check dropped the spring and nothing was reported.  The fit now also starts
+    where the pre-screen's ramp explains most of the missing force."""
+    from kinemaforge_opt.bench.recordings import effect_recording
+
+    er = effect_recording("effect_drawer_limit_contact", 1)
+    d = diagnose(er.model, er.recording, holdout_fraction=0.25)
+    assert [e.type for e in d.effects] == ["limit_contact"], d.summary()
+    assert d.effects[0].value == pytest.approx(0.2, abs=0.005)
