@@ -289,9 +289,7 @@ def diagnose(
     search = EffectSearch(model, srch, sigma_q, sigma_s, friction_smoothing(srch), candidates,
                            segment_s, screen, other_recordings, say, fit_rec, workers)
     search.select(max_effects)
-    search.simulation_check()
-    acceptance, judged_by_held_out = search.acceptance_check(held)
-    judged_by_held_out = judged_by_held_out or search.held_out_check(held)
+    acceptance, judged_by_held_out = search.checks(held)
     say("re-fitting with the selected effects" + ("" if k_dec == 1 else f" at the full {1 / fit_rec.dt:.0f} Hz"))
     nominal, final = search.final_fits(fit_rec, k_dec)
     mismatch = locate(model, fit_rec, nominal.q_fit, sigma_q)

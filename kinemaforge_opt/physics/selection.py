@@ -984,6 +984,35 @@ class EffectSearch:
                               "noise: that recording is not independent here")}
         return acceptance, judged_by_held_out
 
+    def checks(self, held: Recording | None) -> tuple[dict | None, bool]:
+        """The simulation, acceptance and held-out checks (:meth:`simulation_check`,
+        :meth:`acceptance_check`, :meth:`held_out_check`), each run again on what is left after
+        another dropped an effect, until the set passes all three: the set reported is the set
+        every check judged (what a later check leaves was never judged by the earlier ones).
+        Returns (the acceptance record: the first that used a span, else the last; whether the
+        held-out span judged any pass)."""
+        acceptance, judged_by_held_out = None, False
+        passed: set[str] = set()
+        while True:
+            for name in ("simulation", "acceptance", "held_out"):
+                if name in passed:
+                    continue
+                before = len(self.selected)
+                if name == "simulation":
+                    self.simulation_check()
+                elif name == "acceptance":
+                    record, by_held_out = self.acceptance_check(held)
+                    acceptance = acceptance if acceptance and acceptance.get("span") else record or acceptance
+                    judged_by_held_out |= by_held_out
+                else:
+                    judged_by_held_out |= self.held_out_check(held)
+                dropped = len(self.selected) < before
+                if dropped and not self.selected:
+                    return acceptance, judged_by_held_out
+                passed = {name} if dropped else passed | {name}
+            if len(passed) == 3:
+                return acceptance, judged_by_held_out
+
     # --- the full-rate fits -----------------------------------------------------------------
 
     def final_fits(self, fit_rec: Recording, k_dec: int) -> tuple[Calibration, Calibration]:

@@ -122,3 +122,49 @@ def test_a_quantised_encoder_mostly_at_rest_is_not_called_noiseless():
     q = np.round(0.4 * np.exp(-t) * np.sin(6 * t) / step)[:, None] * step
     assert noise_std(q)[0] < 1e-8
     assert measurement_sigma(q)[0] == pytest.approx(step / np.sqrt(12), rel=1e-6)
+
+
+class _Checks:
+    """Stand-in for :class:`~kinemaforge_opt.physics.selection.EffectSearch`'s three checks, each
+    dropping the effects a rule of its own refutes: what ``checks`` calls, and in what order."""
+
+    def __init__(self, selected, refutes):
+        self.selected, self.refutes, self.calls = list(selected), refutes, []
+
+    def _check(self, name):
+        self.calls.append((name, tuple(self.selected)))
+        self.selected = [e for e in self.selected if not self.refutes[name](self.selected, e)]
+
+    def simulation_check(self):
+        self._check("simulation")
+
+    def acceptance_check(self, held):
+        self._check("acceptance")
+        return {"span": None}, False
+
+    def held_out_check(self, held):
+        self._check("held_out")
+        return held is not None
+
+
+def test_what_a_later_check_leaves_is_judged_again_by_every_check():
+    """The held-out check drops the damping; the stop left alone then fails the simulation check
+    (a stop judged only beside the damping): the set reported is one every check passed."""
+    from kinemaforge_opt.physics.selection import EffectSearch
+
+    refutes = {"simulation": lambda s, e: e == "stop" and s == ["stop"],
+               "acceptance": lambda s, e: False,
+               "held_out": lambda s, e: e == "damping"}
+    search = _Checks(["damping", "stop"], refutes)
+    acceptance, judged = EffectSearch.checks(search, held="span")
+    assert search.selected == [] and judged
+    assert search.calls == [("simulation", ("damping", "stop")), ("acceptance", ("damping", "stop")),
+                            ("held_out", ("damping", "stop")), ("simulation", ("stop",))]
+    # a set every check passes first time is judged once by each
+    search = _Checks(["damping"], {k: (lambda s, e: False) for k in refutes})
+    EffectSearch.checks(search, held=None)
+    assert [c for c, _ in search.calls] == ["simulation", "acceptance", "held_out"]
+    # with nothing selected each check still runs once (the acceptance record says which span judged)
+    search = _Checks([], {k: (lambda s, e: False) for k in refutes})
+    assert EffectSearch.checks(search, held=None) == ({"span": None}, False)
+    assert [c for c, _ in search.calls] == ["simulation", "acceptance", "held_out"]
