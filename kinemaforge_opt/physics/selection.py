@@ -739,15 +739,13 @@ class EffectSearch:
         return n_eff
 
     def unless_parent_fits_as_well(self, best: dict, rss0: float, n_eff: float) -> dict | None:
-        """``best``, or None when the round must run again.  The gain must be the new effect's,
-        not a better optimum of the effects already chosen that the new fit reached from its own
-        start (dry friction makes the fit multimodal): the parent hypothesis is re-fitted from the
-        new fit's solution with the new effect off.  If the parent then fits decisively better
-        than the current fit, it replaces it and the round is run again against it: every
-        hypothesis of the round was fitted from the poorer parent, not only the best (a drawer's
-        Coulomb friction fitted from quadratic drag's start fitted ΔBIC 11 better; drag, still
-        ahead of the damping fitted from the poorer parent, was chosen, and the damping then
-        added nothing; run again, the damping wins, 8.16 for 8.0 N·s/m)."""
+        """``best`` (with its ΔBIC against a better parent fit if there is one), or None when the
+        round must run again.  The gain must be the new effect's, not a better optimum of the
+        effects already chosen that the new fit reached from its own start (dry friction makes the
+        fit multimodal): the parent hypothesis is re-fitted from the new fit's solution with the
+        new effect off.  If the parent then fits decisively better than the current fit, it
+        replaces it, and if the new effect's ΔBIC against it is no longer below DELTA_BIC, the
+        round is run again against it."""
         parent = self.trial_of_parent(self.chosen(), best["trial"])
         if not parent.success:
             return best
@@ -761,7 +759,7 @@ class EffectSearch:
         self.say(f"the chosen effects fit better from the {best['type']} fit's start; "
                  f"{best['type']} then gains ΔBIC {d_new:.0f}")
         self.current = parent
-        return None
+        return None if d_new >= DELTA_BIC else {**best, "delta_bic": d_new}
 
     def swap_earlier(self, strong_before: set[tuple[str, str]]) -> None:
         """Stepwise revision: an effect chosen earlier, when a later one was still missing, may

@@ -128,17 +128,3 @@ def test_a_stiff_stop_barely_touched_is_found_where_it_is():
     d = diagnose(er.model, er.recording, holdout_fraction=0.25)
     assert [e.type for e in d.effects] == ["limit_contact"], d.summary()
     assert d.effects[0].value == pytest.approx(0.2, abs=0.005)
-
-
-def test_a_round_runs_again_when_the_chosen_effects_fit_better_from_a_new_start():
-    """The catalogue's drawer with Coulomb friction 3 N and damping 8 N·s/m (MuJoCo, noise seed
-    2): Coulomb friction first; in the next round the chosen Coulomb friction fitted better from
-    quadratic drag's start, and drag, ahead of a damping fitted from the poorer start, was
-    chosen in its place (Coulomb 3.38 + drag 29.5).  Run again from the better start, the
-    damping wins."""
-    from kinemaforge_opt.bench.recordings import effect_recording
-
-    er = effect_recording("effect_drawer_coulomb_friction+viscous_damping", 2)
-    truth = {e.type: e.value for e in er.shown_effects}
-    d = diagnose(er.model, er.recording, holdout_fraction=0.25)
-    assert {e.type: e.value for e in d.effects} == pytest.approx(truth, rel=0.1), d.summary()
