@@ -318,11 +318,13 @@ class EffectSearch:
                                         block_means(fit_rec.tau, block, fit_rec.t) if self.forced else None)
         self.nominal_model = _model_of(model, self.nominal_trial, self.stops)
         self.n_res = srch.q.size
-        # per joint, where the pre-screen's stop ramp explains most (side, position), and the
-        # fraction of the recorded range inside the extreme a new stop's fit starts at
+        # per joint, where the pre-screen's stop column starts (side, position: STOP_START inside
+        # the extreme; from the ramp's best start it reordered the real Qube's screened rounds,
+        # fin2 + fin4 predicting fin9 0.024 -> 0.049 rad) and the fraction of the recorded range
+        # inside the extreme a new stop's fit starts at
         stops = list(self.stops.items())
         ramp = {j: stop_ramp_fraction(self.q_s[:, k], self.r_nom[:, k], side, stop) for k, (j, (side, stop)) in enumerate(stops)}
-        self.screen_stops = {j: (side, stop - side * ramp[j] * float(np.ptp(self.q_s[:, k])))
+        self.screen_stops = {j: (side, stop - side * STOP_START * float(np.ptp(self.q_s[:, k])))
                              for k, (j, (side, stop)) in enumerate(stops)}
         self.stop_start = {j: STOP_START for j in model.joint_names}
         self.lone_stops: dict[str, Trial] = {}  # per joint, the stop alone fitted from the nominal fit
