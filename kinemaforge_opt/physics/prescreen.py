@@ -45,8 +45,11 @@ def limit_stop_guess(model: ArticulatedModel, rec: Recording) -> dict[str, tuple
 
 
 # Where a stop's fit may start, in fractions of the recorded range inside the recorded extreme on
-# its side (:func:`stop_ramp_fraction`).
+# its side (:func:`stop_ramp_fraction`); STOP_START is the default start, and where the
+# pre-screen's stop column starts (from the ramp's best start instead, that column reordered the
+# real Qube's screened rounds: fin2 + fin4 fitted together predicted fin9 0.024 -> 0.049 rad).
 STOP_START_FRACTIONS = (0.01, 0.02, 0.05, 0.1, 0.2)
+STOP_START = 0.05
 
 
 def stop_ramp_fraction(q: np.ndarray, r: np.ndarray, side: float, extreme: float) -> float:
@@ -161,11 +164,12 @@ def _columns(model: ArticulatedModel, joint: str, effect: str, q: np.ndarray, v:
     """Force columns (each (T,)) of ``effect`` on ``joint`` for the linear pre-screen: the effect's
     force per unit parameter (Stribeck at speed ``vs``, default a fifth of the RMS speed), the rigid-body force M a + h
     for an inertia ratio, gravity's sin q and cos q for a revolute axis tilt (a constant for a
-    prismatic one), a one-sided ramp from the stop's start for a limit contact."""
+    prismatic one), a one-sided ramp from STOP_START inside the stop guess for a limit contact."""
     k = model.joint_index(joint)
     qk, vk = q[:, k], v[:, k]
     vs = 0.2 * v_scale[k] if vs is None else vs
     side, stop = stops[joint]
+    span = float(np.ptp(qk))
     if effect == "axis_tilt":
         return [np.ones_like(qk)] if model.joint(joint).type == "prismatic" else [np.sin(qk), np.cos(qk)]
     return {
@@ -173,7 +177,7 @@ def _columns(model: ArticulatedModel, joint: str, effect: str, q: np.ndarray, v:
         "constant_bias": [np.ones_like(vk)], "spring": [-qk, np.ones_like(qk)],
         "stribeck_friction": [_stribeck_column(vk, vs, eps[k])],
         "inertia_error": [id_force[:, k]],
-        "limit_contact": [np.maximum(side * (qk - stop), 0.0)],
+        "limit_contact": [np.maximum(side * (qk - (stop - side * STOP_START * span)), 0.0)],
     }[effect]
 
 
@@ -184,8 +188,7 @@ def screen_scores(model: ArticulatedModel, pending: list[tuple[str, str]], selec
     samples) that the already selected effects on that joint leave and the hypothesis removes
     too, by joint linear least squares on their force columns (:func:`_columns`; a Stribeck
     column at the speed of :func:`stribeck_speeds` that explains most); lower = explains
-    more.  ``stops``: per joint (side, position where a stop's ramp starts).  A cheap ranking,
-    not evidence: the chosen hypotheses are then fitted by the NLP."""
+    more.  A cheap ranking, not evidence: the chosen hypotheses are then fitted by the NLP."""
     out = {}
     for joint, effect in pending:
         k = model.joint_index(joint)

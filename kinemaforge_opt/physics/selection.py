@@ -17,7 +17,7 @@ from ..nlp.joint_space import build_joint_space_fit, match_recording, velocity_e
 from ..parallel import process_map
 from .locate import THRESHOLD_SIGMA, block_means, inverse_dynamics_residual, motion_window
 from .predict import HeldOut, predict_before_after, prediction_signal
-from .prescreen import inertia_columns, limit_stop_guess, linear_init, screen_scores, stop_ramp_fraction
+from .prescreen import STOP_START, inertia_columns, limit_stop_guess, linear_init, screen_scores, stop_ramp_fraction
 from .search import CPU_CAP_STATUS, HypothesisFit, Trial, effect_parameters
 
 DELTA_BIC = -10.0
@@ -76,15 +76,13 @@ PREDICTION_TRIES = 3
 # better optimum from a candidate's solution (see :meth:`EffectSearch.unless_parent_fits_as_well`).
 MAX_PARENT_REFITS = 2
 
-# Where a joint's new stops start their fits, in fractions of the recorded range inside the
-# recorded extreme on the stop's side: this, or the pre-screen ramp's best start
-# (:func:`~.prescreen.stop_ramp_fraction`) if a stop alone fits clearly better from there
-# (:meth:`EffectSearch.choose_stop_starts`).  A stiff stop barely touched (a drawer run 1.6 mm
-# into a 5000 N/m stop at 30 Hz: a few samples in contact) has local minima in its position: from
-# 5 % inside, one seed's fit stalled at 0.172 m (ΔBIC -126 against the oracle's -902), another's
-# at 0.185 m; from the ramp's 2 % both reach 0.197 / 0.200 m for 0.2.  Both starts for every stop
-# fit cost the 10-s door 0.7 s more.
-STOP_START = 0.05
+# Where a joint's new stops start their fits: prescreen.STOP_START inside the recorded extreme on
+# the stop's side, or the pre-screen ramp's best start (:func:`~.prescreen.stop_ramp_fraction`)
+# if a stop alone fits clearly better from there (:meth:`EffectSearch.choose_stop_starts`).  A
+# stiff stop barely touched (a drawer run 1.6 mm into a 5000 N/m stop at 30 Hz: a few samples in
+# contact) has local minima in its position: from 5 % inside, one seed's fit stalled at 0.172 m
+# (ΔBIC -126 against the oracle's -902), another's at 0.185 m; from the ramp's 2 % both reach
+# 0.197 / 0.200 m for 0.2.  Both starts for every stop fit cost the 10-s door 0.7 s more.
 
 # Effect types tested, in order; the parameters freed for each are its EFFECTS[type].params
 # (first = reported value).
@@ -318,18 +316,11 @@ class EffectSearch:
                                         block_means(fit_rec.tau, block, fit_rec.t) if self.forced else None)
         self.nominal_model = _model_of(model, self.nominal_trial, self.stops)
         self.n_res = srch.q.size
-        # per joint, where the pre-screen's stop column starts (side, position: STOP_START inside
-        # the extreme; from the ramp's best start it reordered the real Qube's screened rounds,
-        # fin2 + fin4 predicting fin9 0.024 -> 0.049 rad) and the fraction of the recorded range
-        # inside the extreme a new stop's fit starts at
-        stops = list(self.stops.items())
-        ramp = {j: stop_ramp_fraction(self.q_s[:, k], self.r_nom[:, k], side, stop) for k, (j, (side, stop)) in enumerate(stops)}
-        self.screen_stops = {j: (side, stop - side * STOP_START * float(np.ptp(self.q_s[:, k])))
-                             for k, (j, (side, stop)) in enumerate(stops)}
+        # per joint, the fraction of the recorded range inside the extreme a new stop's fit starts at
         self.stop_start = {j: STOP_START for j in model.joint_names}
         self.lone_stops: dict[str, Trial] = {}  # per joint, the stop alone fitted from the nominal fit
         if "limit_contact" in candidates:
-            self.choose_stop_starts(ramp)
+            self.choose_stop_starts()
         # The prediction gate's judge (``prediction_gate``): the first other recording whose
         # nominal prediction errs by THRESHOLD_SIGMA noise sigmas or more, found on first use.
         self.judge: dict = {}
@@ -384,12 +375,15 @@ class EffectSearch:
             return self.lone_stops[effects[0][0]]
         return self.trial_from(effects, start, self.stop_start)
 
-    def choose_stop_starts(self, ramp: dict[str, float]) -> None:
+    def choose_stop_starts(self) -> None:
         """Per joint, fit a stop alone from the nominal fit starting STOP_START inside the
-        recorded extreme and, where it differs, from the pre-screen ramp's start ``ramp[j]``.  The
+        recorded extreme and, where it differs, from the pre-screen ramp's best start
+        (:func:`~.prescreen.stop_ramp_fraction` of the nominal residual force).  The
         ramp's start is where every later new stop on that joint starts if its fit converged and
         beat the other's by the selection margin (DELTA_BIC; a start better by the noise, on a
         recording with no stop, made a later pair's fit run to its iteration cap)."""
+        ramp = {j: stop_ramp_fraction(self.q_s[:, k], self.r_nom[:, k], side, stop)
+                for k, (j, (side, stop)) in enumerate(self.stops.items())}
         starts = [(j, x) for j, f in ramp.items() if f != STOP_START for x in (STOP_START, f)]
         fits = dict(zip(starts, process_map(
             lambda jx: self.trial_from([(jx[0], "limit_contact")], self.nominal_trial, {jx[0]: jx[1]}),
@@ -555,7 +549,7 @@ class EffectSearch:
         if self.screen is None or len(pending) <= self.screen or (whole and len(pending) <= FIT_WHOLE_ROUND):
             return pending
         scores = screen_scores(self.model, pending, keep, self.r_nom, self.id_force, self.q_s, self.v_s, self.eps,
-                               self.v_scale, self.screen_stops)
+                               self.v_scale, self.stops)
         top = sorted(pending, key=lambda je: scores[je])[: self.screen]
         return [je for je in pending if je in top or je in strong_before]
 
