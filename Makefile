@@ -27,13 +27,15 @@ test-all: $(STAMP)
 bench: $(STAMP)
 	$(VENV)/bin/kinemaforge bench -o bench_results
 
-# Installs missing Debian packages only (apt-get update runs only when something is missing).
+# Installs missing Debian packages only (apt-get update runs only when something is missing);
+# waits up to 10 min for another apt/dpkg (e.g. a second checkout's make) to release its lock.
 sysdeps:
 	@missing=$$(for p in $(SYSTEM_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
 	if [ -n "$$missing" ]; then \
 	  echo "installing system packages: $$missing"; \
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
-	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq $$missing; \
+	  $$SUDO apt-get -o DPkg::Lock::Timeout=600 update -qq && \
+	  DEBIAN_FRONTEND=noninteractive $$SUDO apt-get -o DPkg::Lock::Timeout=600 install -y -qq $$missing; \
 	fi
 
 $(VENV)/bin/python:

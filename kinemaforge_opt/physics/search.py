@@ -242,8 +242,9 @@ class _StructuredNLP:
         t_eval = _time.process_time() - t0
         self.max_cpu_s = max(1.0, min(max_iter, CPU_CAP_EVALUATIONS) * t_eval) if max_cpu_s is None else float(max_cpu_s)
         opts = {"ipopt.max_iter": max_iter, "ipopt.tol": tol, "ipopt.print_level": print_level, "print_time": False,
-                "ipopt.sb": "yes", "jac_g": jac_fn, "hess_lag": hess_fn,
-                "ipopt.max_cpu_time": self.max_cpu_s}
+                "ipopt.sb": "yes", "jac_g": jac_fn, "hess_lag": hess_fn}
+        if np.isfinite(self.max_cpu_s):
+            opts["ipopt.max_cpu_time"] = self.max_cpu_s
         self.solver = ca.nlpsol("hypotheses", "ipopt", {"x": w, "f": f, "g": g}, opts)
         self.fit = fit
 
@@ -257,7 +258,7 @@ class HypothesisFit:
     noise and friction_eps (n,) the smooth-sign width [rad/s or m/s] (defaults: from the
     recording; see :func:`kinemaforge_opt.nlp.joint_space.build_joint_space_fit`).  max_cpu_s: IPOPT
     CPU-time cap of a solve [s] (default: per subset, ``CPU_CAP_EVALUATIONS`` evaluations of its
-    derivatives, timed at its build, at least 1 s).
+    derivatives, timed at its build, at least 1 s; ``math.inf``: none, max_iter alone bounds it).
     """
 
     def __init__(self, model: ArticulatedModel, recording: Recording, hypotheses: list[tuple[str, str]],

