@@ -1034,15 +1034,8 @@ class EffectSearch:
             t_s = self.fits["base"].t_grid
             nominal_full = full.solve([], x0=full.states_from(t_s, self.nominal_trial.X))
             names = [n for j, e in chosen for n in effect_parameters(model, j, e)]
-            start = {n: self.current.values[n] for n in names}
-            x0 = full.states_from(t_s, self.current.X)
-            final_full = full.solve(names, init=start, bounds=self.current.bounds, x0=x0) if chosen else nominal_full
-            if not final_full.success:
-                # Not converged at the full rate (the same drawer's rigid stop: its stiffness and
-                # damper climb for 200 iterations): the search grid's converged values are
-                # reported, the states re-fitted at the full rate with them held.
-                self.say(f"the full-rate fit did not converge ({final_full.status}); the search grid's values are kept")
-                final_full = full.solve(names, init=start, bounds={n: (v, v) for n, v in start.items()}, x0=x0)
+            final_full = self.full_rate_fit(full, names, {n: self.current.values[n] for n in names}, self.current.bounds,
+                                            x0=full.states_from(t_s, self.current.X)) if chosen else nominal_full
             nominal = _calibration(model, fit_rec, nominal_full, [], stops, segment_s, sigma_q, eps)
             final = _calibration(model, fit_rec, final_full, chosen, stops, segment_s, sigma_q, eps, fit=full.fit)
 
@@ -1068,10 +1061,25 @@ class EffectSearch:
                 self.current = self.trial_of_parent(chosen, self.current) if chosen else self.nominal_trial
                 final = _calibration(model, fit_rec, self.current, chosen, stops, segment_s, sigma_q, eps)
             else:
-                final_full = full.solve(names, start=final_full,
-                                        bounds={n: b for n, b in self.current.bounds.items() if n in names}) \
-                    if chosen else nominal_full
+                final_full = self.full_rate_fit(full, names, {n: final_full.values[n] for n in names},
+                                                {n: b for n, b in self.current.bounds.items() if n in names},
+                                                start=final_full) if chosen else nominal_full
                 final = _calibration(model, fit_rec, final_full, chosen, stops, segment_s, sigma_q, eps)
+
+    def full_rate_fit(self, full: HypothesisFit, names: list[str], values: dict[str, np.ndarray],
+                      bounds: dict[str, tuple[float, float]], **start) -> Trial:
+        """The fit of the parameters ``names`` at the full rate (``full``), from ``values`` and the
+        states ``start`` gives (``x0=`` or ``start=`` of :meth:`HypothesisFit.solve`).  If it does
+        not converge (a rigid stop's stiffness and damper climb for all the iterations), the
+        converged ``values`` it started from (the search grid's) are reported: the states are
+        re-fitted with them held."""
+        trial = full.solve(names, init=values, bounds=bounds, **start)
+        if trial.success:
+            return trial
+        self.say(f"the full-rate fit did not converge ({trial.status}); the values it started from are kept")
+        self.tested.append({"full_rate_fit": names, "converged": False, "after_iterations": trial.iterations,
+                            "kept": "the values it started from, the states re-fitted with them held"})
+        return full.solve(names, init=values, bounds={n: (v, v) for n, v in values.items()}, **start)
 
     def found_effects(self, final: Calibration) -> list[FoundEffect]:
         """The selected effects as reported: value, unit, 95 % interval, ΔBIC and extra params
