@@ -78,6 +78,10 @@ def register(sub) -> None:
                    help="processes that fit a selection round's hypotheses side by side (default: the CPUs "
                         "this process may use, or OMP_NUM_THREADS; 1: all in this process); the findings do "
                         "not depend on it")
+    p.add_argument("--cpu-cap", type=float, default=None, metavar="S",
+                   help="IPOPT CPU-time cap of each hypothesis fit [s] (default: 100 derivative evaluations, at "
+                        "least 1 s); 'inf' for none: the findings are then the same on every machine, but a "
+                        "hypothesis stuck in IPOPT's restoration phase can take minutes")
     p.set_defaults(func=run)
 
 
@@ -114,7 +118,8 @@ def run(args) -> int:
     for other in others:
         match_recording(model, other)
     d = diagnose(model, recs, holdout_fraction=args.holdout, progress=progress, segment_s=args.segment,
-                 other_recordings=others, max_effects=args.max_effects or MAX_EFFECTS, workers=args.workers)
+                 other_recordings=others, max_effects=args.max_effects or MAX_EFFECTS, workers=args.workers,
+                 cpu_cap_s=args.cpu_cap)
     bar.close()
     if reconstructed:
         import dataclasses

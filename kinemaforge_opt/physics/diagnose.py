@@ -242,6 +242,7 @@ def diagnose(
     other_recordings: tuple[Recording, ...] = (),
     screen: int | None = SCREEN,
     workers: int | None = None,
+    cpu_cap_s: float | None = None,
 ) -> Diagnosis:
     """Locate, explain, model and show the mismatch between ``model`` and ``recording``.
 
@@ -263,6 +264,12 @@ def diagnose(
     OMP_NUM_THREADS; 1: all in this process); the findings do not depend on it.  More than one
     forks this process (only the calling thread lives on in a child): pass 1 from a program whose
     other threads may be inside CasADi or hold a lock the fits need while this runs.
+    cpu_cap_s: IPOPT's CPU-time cap of each hypothesis fit of the search [s] (None: 100
+    evaluations of its derivatives, timed, at least 1 s; a fit that reaches it is unsupported).
+    The findings then depend on the machine's speed where a fit ends near the cap;
+    ``math.inf`` makes them the same on every machine, at the cost of the rare hypothesis that
+    spends minutes in IPOPT's restoration phase (the real Qube: 2-4x the time).  The final
+    full-rate fits never have a cap.
     """
     say = progress or (lambda s: None)
     spans, left_out = fit_spans(model, recording)
@@ -271,6 +278,8 @@ def diagnose(
         raise DataError(f"unknown candidate effect(s) {unknown}; available: {', '.join(CANDIDATES)}")
     if workers is not None and workers < 1:
         raise DataError(f"workers={workers}: the hypothesis fits need at least one process")
+    if cpu_cap_s is not None and not cpu_cap_s > 0:
+        raise DataError(f"cpu_cap_s={cpu_cap_s}: a CPU-time cap must be a positive number of seconds (math.inf: none)")
     fits, helds = zip(*(_split(r, holdout_fraction, k if len(spans) > 1 else None) for k, r in enumerate(spans)))
     fit_rec = join_recordings(fits)
     held_parts = [h for h in helds if h is not None]
@@ -287,7 +296,7 @@ def diagnose(
     say("fitting the nominal model" if k_dec == 1 else
         f"fitting the nominal model ({1 / srch.dt:.0f} Hz search grid, {k_dec}-sample block means)")
     search = EffectSearch(model, srch, sigma_q, sigma_s, friction_smoothing(srch), candidates,
-                           segment_s, screen, other_recordings, say, fit_rec, workers)
+                           segment_s, screen, other_recordings, say, fit_rec, workers, cpu_cap_s)
     search.select(max_effects)
     acceptance, judged_by_held_out = search.checks(held)
     say("re-fitting with the selected effects" + ("" if k_dec == 1 else f" at the full {1 / fit_rec.dt:.0f} Hz"))

@@ -283,14 +283,15 @@ class EffectSearch:
     sigma_s (n,): the noise of the search grid's block means; eps (n,): the smooth-sign width [rad/s or m/s].  workers: processes
     for a round's independent hypothesis fits (None: :func:`~kinemaforge_opt.parallel.workers`).
     fit_rec: the full-rate fit span whose block means ``srch`` is (the pre-screen's derivatives
-    come from it)."""
+    come from it).  cpu_cap_s: IPOPT's CPU-time cap of each hypothesis fit [s] (None: the
+    default of :class:`~kinemaforge_opt.physics.search.HypothesisFit`)."""
 
     def __init__(self, model: ArticulatedModel, srch: Recording, sigma_q: np.ndarray, sigma_s: np.ndarray,
                  eps: np.ndarray, candidates: tuple[str, ...], segment_s: float | None,
                  screen: int | None, other_recordings: tuple[Recording, ...], say, fit_rec: Recording,
-                 workers: int | None = None):
+                 workers: int | None = None, cpu_cap_s: float | None = None):
         self.model, self.srch = model, srch
-        self.workers = workers
+        self.workers, self.cpu_cap_s = workers, cpu_cap_s
         self.sigma_q, self.sigma_s, self.eps = sigma_q, sigma_s, eps
         self.candidates, self.segment_s, self.screen = candidates, segment_s, screen
         self.other_recordings, self.say = other_recordings, say
@@ -302,7 +303,7 @@ class EffectSearch:
         self.moving_links = {j.child for j in model.movable_joints}
         self.hyps = [(j, e) for j in model.joint_names for e in candidates if e != "axis_tilt"]
         self.fits = {"base": HypothesisFit(model, srch, self.hyps, segment_s, self.stops, CANDIDATE_MAX_ITER,
-                                           sigma_s, eps)}
+                                           sigma_s, eps, max_cpu_s=cpu_cap_s)}
         self.nominal_trial = self.fits["base"].solve([])
         self.nominal_z = {n: self.fits["base"].nominal_z(n) for n in self.fits["base"].blocks}
         self.v_scale = np.sqrt(np.mean(velocity_estimate(srch) ** 2, axis=0))
@@ -363,7 +364,7 @@ class EffectSearch:
         if "axis" not in self.fits:
             tilts = [(j, "axis_tilt") for j in self.model.joint_names if "axis_tilt" in self.candidates]
             self.fits["axis"] = HypothesisFit(self.model, self.srch, self.hyps + tilts, self.segment_s, self.stops,
-                                              CANDIDATE_MAX_ITER, self.sigma_s, self.eps)
+                                              CANDIDATE_MAX_ITER, self.sigma_s, self.eps, max_cpu_s=self.cpu_cap_s)
         return self.fits["axis"]
 
     def trial_of(self, effects: list[tuple[str, str]], start: Trial) -> Trial:

@@ -138,12 +138,39 @@ def test_null_case_reports_nothing():
     assert d.effects == () and "no effect is supported" in d.summary()
 
 
+def test_without_a_cpu_cap_every_fit_runs_to_its_iterations_and_finds_the_same(friction_case, monkeypatch):
+    """``cpu_cap_s=math.inf`` (the findings the same on every machine) reaches every hypothesis
+    fit's IPOPT; the default caps them, except the nominal fit and the final full-rate fits.
+    Without a cap the door's friction and damping are found as with it."""
+    import math
+
+    from kinemaforge_opt.physics import search
+
+    model, rec, capped = friction_case
+    caps: dict[tuple[str, ...], float] = {}
+    build = search._StructuredNLP.__init__
+
+    def recording_caps(self, fit, free, max_iter, *args, **kwargs):
+        build(self, fit, free, max_iter, *args, **kwargs)
+        caps[free] = self.max_cpu_s
+
+    monkeypatch.setattr(search._StructuredNLP, "__init__", recording_caps)
+    d = diagnose(model, rec, cpu_cap_s=math.inf, workers=1)
+    assert len(caps) > 5 and all(c == math.inf for c in caps.values())
+    assert {e.type for e in d.effects} == {e.type for e in capped.effects} == {"coulomb_friction", "viscous_damping"}
+    caps.clear()
+    diagnose(model, rec, workers=1)
+    assert caps[()] == math.inf and all(np.isfinite(c) for free, c in caps.items() if free)
+
+
 def test_bad_input_is_named(friction_case, tmp_path):
     model, rec, _ = friction_case
     with pytest.raises(DataError, match="unknown candidate effect"):
         diagnose(model, rec, candidates=("magic",))
     with pytest.raises(DataError, match="workers=0"):
         diagnose(model, rec, workers=0)
+    with pytest.raises(DataError, match="cpu_cap_s=0"):
+        diagnose(model, rec, cpu_cap_s=0)
     short = Recording(rec.t[:8], rec.joint_names, rec.q[:8])
     with pytest.raises(DataError, match="too few"):
         diagnose(model, short)
