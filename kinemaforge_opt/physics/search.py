@@ -237,14 +237,16 @@ class _StructuredNLP:
         # one Jacobian evaluation, timed here, the bulk of an iteration): a hypothesis that
         # sends IPOPT into a long restoration phase is abandoned (not converged) instead of
         # costing minutes.
-        import time as _time
+        if max_cpu_s is None:
+            import time as _time
 
-        w_probe = np.zeros(nw)
-        t0 = _time.process_time()
-        hess_fn(w_probe, [], 1.0, np.zeros(ng))
-        jac_fn(w_probe, [])
-        t_eval = _time.process_time() - t0
-        self.max_cpu_s = max(1.0, min(max_iter, CPU_CAP_EVALUATIONS) * t_eval) if max_cpu_s is None else float(max_cpu_s)
+            w_probe = np.zeros(nw)
+            t0 = _time.process_time()
+            hess_fn(w_probe, [], 1.0, np.zeros(ng))
+            jac_fn(w_probe, [])
+            t_eval = _time.process_time() - t0
+            max_cpu_s = max(1.0, min(max_iter, CPU_CAP_EVALUATIONS) * t_eval)
+        self.max_cpu_s = float(max_cpu_s)
         opts = {"ipopt.max_iter": max_iter, "ipopt.tol": tol, "ipopt.print_level": print_level, "print_time": False,
                 "ipopt.sb": "yes", "jac_g": jac_fn, "hess_lag": hess_fn}
         if np.isfinite(self.max_cpu_s):

@@ -77,14 +77,6 @@ PREDICTION_TRIES = 3
 # better optimum from a candidate's solution (see :meth:`EffectSearch.unless_parent_fits_as_well`).
 MAX_PARENT_REFITS = 2
 
-# Where a joint's new stops start their fits: prescreen.STOP_START inside the recorded extreme on
-# the stop's side, or the pre-screen ramp's best start (:func:`~.prescreen.stop_ramp_fraction`)
-# if a stop alone fits clearly better from there (:meth:`EffectSearch.choose_stop_starts`).  A
-# stiff stop barely touched (a drawer run 1.6 mm into a 5000 N/m stop at 30 Hz: a few samples in
-# contact) has local minima in its position: from 5 % inside, one seed's fit stalled at 0.172 m
-# (ΔBIC -126 against the oracle's -902), another's at 0.185 m; from the ramp's 2 % both reach
-# 0.197 / 0.200 m for 0.2.  Both starts for every stop fit cost the 10-s door 0.7 s more.
-
 # Effect types tested, in order; the parameters freed for each are its EFFECTS[type].params
 # (first = reported value).
 CANDIDATES: tuple[str, ...] = (
@@ -383,7 +375,12 @@ class EffectSearch:
         (:func:`~.prescreen.stop_ramp_fraction` of the nominal residual force).  The
         ramp's start is where every later new stop on that joint starts if its fit converged and
         beat the other's by the selection margin (DELTA_BIC; a start better by the noise, on a
-        recording with no stop, made a later pair's fit run to its iteration cap)."""
+        recording with no stop, made a later pair's fit run to its iteration cap).  Why two: a
+        stiff stop barely touched (a drawer run 1.6 mm into a 5000 N/m stop at 30 Hz: a few
+        samples in contact) has local minima in its position: from 5 % inside, one seed's fit
+        stalled at 0.172 m (ΔBIC -126 against the oracle's -902), another's at 0.185 m; from the
+        ramp's 2 % both reach 0.197 / 0.200 m for 0.2.  Both starts for every stop fit cost the
+        10-s door 0.7 s more."""
         ramp = {j: stop_ramp_fraction(self.q_s[:, k], self.r_nom[:, k], side, stop)
                 for k, (j, (side, stop)) in enumerate(self.stops.items())}
         starts = [(j, x) for j, f in ramp.items() if f != STOP_START for x in (STOP_START, f)]
