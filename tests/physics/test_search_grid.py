@@ -116,6 +116,20 @@ def test_a_swap_is_judged_against_the_chosen_effects_at_their_best():
     assert {e.type: e.value for e in d.effects} == pytest.approx(truth, rel=0.1), d.summary()
 
 
+def test_an_effect_chosen_against_a_re_fitted_parent_faces_the_round_again():
+    """The same drawer, noise seed 2: Coulomb friction was chosen, then in the next round
+    quadratic drag re-fitted the parent to a better optimum and won by ΔBIC −221 against it, while
+    damping's fit (−167) had been judged against the old parent.  Fitted in drag's place from the
+    new fit, damping fits better (by 4.7) and replaces it."""
+    from kinemaforge_opt.bench.recordings import effect_recording
+
+    er = effect_recording("effect_drawer_coulomb_friction+viscous_damping", 2)
+    truth = {e.type: e.value for e in er.shown_effects}
+    d = diagnose(er.model, er.recording)
+    assert {e.type: e.value for e in d.effects} == pytest.approx(truth, rel=0.1), d.summary()
+    assert any("swap" in t and t["swap"].startswith("quadratic_drag") for t in d.tested)
+
+
 def test_a_stiff_stop_barely_touched_is_found_where_it_is():
     """The catalogue's drawer run into a 5000 N/m stop at 0.2 m (MuJoCo, noise seed 1, 30 Hz): it
     presses 1.6 mm in, a few samples.  From its one start 5 % of the stroke inside the extreme the
