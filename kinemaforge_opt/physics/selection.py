@@ -805,7 +805,8 @@ class EffectSearch:
         the chosen effects that the swap's fit reached from its own start: they are re-fitted from
         it, and replace the current fit if they fit better (a drawer's damping + Coulomb friction
         from a poor start was "beaten" by Coulomb friction + a spring by ΔBIC −164; re-fitted, the
-        spring's interval held 0, and the damping was lost)."""
+        spring's interval held 0, and the damping was lost).  threshold: the ΔBIC the swap must
+        still gain, below 0."""
         gain, joint, effect, trial = swap
         again = self.trial_of_parent(self.chosen(), trial)
         if not again.success or self.rss(again) >= self.rss(self.current):
