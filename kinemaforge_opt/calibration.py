@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -138,6 +138,7 @@ def calibrate(
     friction_eps: float | None = None,
     method: str = "collocation",
     segment_s: float | None = None,
+    on_iteration: Callable[[int, float], None] | None = None,
 ) -> Calibration:
     """Fit ``free`` parameters of ``model`` to ``recording`` (joint-space NLP, IPOPT).
 
@@ -154,6 +155,7 @@ def calibrate(
     from its own state: joined end to end with a pause between them that fits and derivatives do
     not cross (:func:`~kinemaforge_opt.nlp.joint_space.join_recordings`); ``Calibration.recording``
     and ``q_fit`` are then on that joined time axis.
+    on_iteration: called with (IPOPT iteration, objective) after each iteration (a progress bar).
     Raises for bad input (unknown names, missing joints, no motion) before any work starts.
     """
     if method not in ("collocation", "inverse_dynamics"):
@@ -166,7 +168,8 @@ def calibrate(
         from .nlp.inverse_dynamics import calibrate_inverse_dynamics
 
         # Near-unidentifiable directions make IPOPT crawl: allow it more iterations.
-        cal = calibrate_inverse_dynamics(model, rec, free=free, effects=effects, max_iter=max(max_iter, 1000))
+        cal = calibrate_inverse_dynamics(model, rec, free=free, effects=effects, max_iter=max(max_iter, 1000),
+                                         on_iteration=on_iteration)
     else:
         if free is None:
             free = [f"{j}.{p}" for j in model.joint_names for p in ("damping", "coulomb")]
@@ -175,7 +178,7 @@ def calibrate(
             model, rec, tuple(free), effects, energy=energy, energy_weight=energy_weight,
             substeps=substeps, friction_eps=friction_eps, segment_s=segment_s,
         )
-        res = fit.problem.solve(max_iter=max_iter, print_level=print_level)
+        res = fit.problem.solve(max_iter=max_iter, print_level=print_level, on_iteration=on_iteration)
         X = res.values["x"]
         z = np.concatenate([np.atleast_1d(res.values[f"p:{b.name}"]) for b in fit.blocks]) if fit.blocks else np.zeros(0)
         cal = _result(fit, res, X, z, time.perf_counter() - start)

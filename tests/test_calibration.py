@@ -65,8 +65,8 @@ def test_problem_can_be_inspected_before_solving(door_case):
     fit = build_joint_space_fit(model, rec, (f"{j}.axis", f"{j}.damping"), energy="hard")
     terms = fit.problem.terms
     assert terms["costs"] == ["output_q"]
-    assert set(terms["constraints"]) == {"dynamics", "energy", f"unit_axis:{j}"}
-    assert fit.problem.sizes["variables"] == 2 * rec.t.size + 4
+    assert set(terms["constraints"]) == {"dynamics", "energy_books", "energy", f"unit_axis:{j}"}
+    assert fit.problem.sizes["variables"] == 2 * rec.t.size + 4 + rec.t.size  # x, axis + damping, books
 
 
 def test_non_convergence_is_a_state_not_an_exception(door_case):

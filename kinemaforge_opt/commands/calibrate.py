@@ -30,7 +30,7 @@ def register(sub) -> None:
         help="fit joint dynamics / axes / inertias of a URDF to a joint-space recording",
         description="Fit the chosen parameters of MODEL.urdf to RECORDING.csv (t, q:<joint>, "
         "optional v:<joint>, tau:<joint>) with a CasADi/IPOPT collocation NLP on Pinocchio's ABA. "
-        "Writes OUT/model.urdf (calibrated) and OUT/calibration.json (estimates, 95%% intervals, "
+        "Writes OUT/model.urdf (calibrated) and OUT/calibration.json (estimates, 95 % intervals, "
         "identifiability notes).",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -66,7 +66,16 @@ def run(args) -> int:
     join_recordings(fit_spans(model, recs)[0])  # names the joint or recording at fault before any work
     print(f"calibrating {sum(len(r.t) for r in recs)} samples × {len(recs[0].joint_names)} joints"
           + (f" from {len(recs)} recordings" if len(recs) > 1 else "") + " …", flush=True)
-    cal = calibrate(model, recs, free=free, energy=args.energy, substeps=args.substeps, method=args.method)
+    from tqdm import tqdm
+
+    with tqdm(desc="calibrate", unit="it", leave=False) as bar:  # one tick per IPOPT iteration
+        def progress(iteration: int, objective: float) -> None:
+            bar.set_postfix_str(f"objective {objective:.4g}", refresh=False)
+            bar.update(1)
+
+        cal = calibrate(model, recs, free=free, energy=args.energy, substeps=args.substeps, method=args.method,
+                        on_iteration=progress)
+    print(f"IPOPT: {cal.iterations} iterations, {cal.solve_time_s:.1f} s")
     out = Path(args.out)
     write_urdf(cal.model, out / "model.urdf")
     write_text_atomic(out / "calibration.json", json.dumps(cal.to_dict(), indent=2))

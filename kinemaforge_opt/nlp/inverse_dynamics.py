@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 
 import casadi as ca
 import numpy as np
@@ -224,8 +225,10 @@ def calibrate_inverse_dynamics(
     max_samples: int = 2000,
     trim_s: float = 0.1,
     slow_fraction: float = 0.1,
+    on_iteration: Callable[[int, float], None] | None = None,
 ) -> Calibration:
     """Fit ``free`` parameters of ``model`` to the measured torques of ``recording`` (module doc).
+    on_iteration: passed to :meth:`~kinemaforge_opt.nlp.problem.Problem.solve`.
 
     free: names among ``<link>.inertia`` (10, log-Cholesky inside), ``<joint>.armature``,
     ``<joint>.damping``, ``<joint>.coulomb``, ``<joint>.bias``; default: all of them for the
@@ -304,7 +307,7 @@ def calibrate_inverse_dynamics(
     prob.add_cost("prior", ca.sumsqr(z - z0) / (PRIOR_WIDTH**2 * N * n))
     if any(b.name.endswith(".inertia") for b in blocks):
         prob.add_cost("inertia_prior", divergence / (PRIOR_WIDTH**2 * N * n))
-    res = prob.solve(max_iter=max_iter, options={"expand": True})
+    res = prob.solve(max_iter=max_iter, options={"expand": True}, on_iteration=on_iteration)
     zhat = np.concatenate([
         dynamic_from_log_cholesky(res.values[f"logchol:{b.name}"]) / b.scale if b.name.endswith(".inertia")
         else res.values[f"p:{b.name}"] for b in blocks])

@@ -9,6 +9,7 @@ which reports every named cost and the worst violation of every named constraint
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -139,16 +140,20 @@ class Problem:
         return self._vars[name].symbol
 
     # --- solve ----------------------------------------------------------------------------
-    def compile(self, max_iter: int = 500, tol: float = 1e-8, print_level: int = 0, options: dict | None = None) -> "CompiledProblem":
+    def compile(self, max_iter: int = 500, tol: float = 1e-8, print_level: int = 0, options: dict | None = None,
+                on_iteration: Callable[[int, float], None] | None = None) -> "CompiledProblem":
         """Build the IPOPT solver once (casadi ``nlpsol``); the returned :class:`CompiledProblem`
         solves it many times with other bounds, initial guesses or constraint bounds.  Variables
         fixed by equal bounds are removed by IPOPT (``fixed_variable_treatment=make_parameter``),
         so one compiled problem serves every subset of free parameters."""
-        return CompiledProblem(self, max_iter, tol, print_level, options)
+        return CompiledProblem(self, max_iter, tol, print_level, options, on_iteration)
 
     def solve(self, max_iter: int = 500, tol: float = 1e-8, print_level: int = 0, options: dict | None = None,
-              warm: Result | None = None) -> Result:
+              warm: Result | None = None, on_iteration: Callable[[int, float], None] | None = None) -> Result:
         """Solve with IPOPT (MUMPS).  Returns a :class:`Result` whatever IPOPT's outcome.
+
+        on_iteration: called after every IPOPT iteration with (iteration, objective) (e.g. to
+        move a progress bar).
 
         warm: the result of an earlier solve of a problem of the same layout (its last iterate
         is this problem's initial guess): IPOPT starts from its multipliers and barrier parameter
@@ -157,8 +162,8 @@ class Problem:
         if warm is not None and warm.lam_x is not None and np.isfinite(warm.final_mu):
             options = {**(options or {}), "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": warm.final_mu,
                        "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9}
-            return self.compile(max_iter, tol, print_level, options).solve(multipliers=(warm.lam_x, warm.lam_g))
-        return self.compile(max_iter, tol, print_level, options).solve()
+            return self.compile(max_iter, tol, print_level, options, on_iteration).solve(multipliers=(warm.lam_x, warm.lam_g))
+        return self.compile(max_iter, tol, print_level, options, on_iteration).solve()
 
 
 class CompiledProblem:
@@ -167,7 +172,8 @@ class CompiledProblem:
     variable) and per-constraint overrides of its bounds (``constraint_bounds``: name ->
     (lower, upper)).  Build cost (symbolic derivatives) is paid once."""
 
-    def __init__(self, problem: Problem, max_iter: int, tol: float, print_level: int, options: dict | None):
+    def __init__(self, problem: Problem, max_iter: int, tol: float, print_level: int, options: dict | None,
+                 on_iteration: Callable[[int, float], None] | None = None):
         self.problem = problem
         self.names = list(problem._vars)
         x = ca.vertcat(*[ca.vec(problem._vars[n].symbol) for n in self.names])
@@ -182,6 +188,9 @@ class CompiledProblem:
             "ipopt.sb": "yes",
         }
         opts.update(options or {})
+        if on_iteration is not None:  # kept on self: CasADi holds no reference to the Python object
+            self._hook = _IterationHook(x.numel(), g.numel(), on_iteration)
+            opts["iteration_callback"] = self._hook
         self.solver = ca.nlpsol(problem.name, "ipopt", {"x": x, "f": f, "g": g}, opts)
         self.evaluate = ca.Function("terms", [x], list(problem._costs.values()) + [c[0] for c in cons])
         self._slices, self._gslices = problem.layout()
@@ -241,3 +250,34 @@ class CompiledProblem:
             lam_x=sol["lam_x"].full().ravel(),
             lam_g=sol["lam_g"].full().ravel(),
         )
+
+
+class _IterationHook(ca.Callback):
+    """CasADi's ``iteration_callback``: IPOPT calls it after each iteration with nlpsol's outputs
+    (x, f, g, lam_x, lam_g, lam_p); it passes (iteration, objective) on and returns 0 (go on)."""
+
+    def __init__(self, nx: int, ng: int, report: Callable[[int, float], None]):
+        ca.Callback.__init__(self)
+        self._nx, self._ng, self._report, self._iteration = nx, ng, report, 0
+        self.construct("iteration_hook", {})
+
+    def get_n_in(self):
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self):
+        return 1
+
+    def get_name_in(self, i):
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i):
+        return "ret"
+
+    def get_sparsity_in(self, i):
+        n = {"x": self._nx, "f": 1, "g": self._ng, "lam_x": self._nx, "lam_g": self._ng, "lam_p": 0}[ca.nlpsol_out(i)]
+        return ca.Sparsity.dense(n, 1)
+
+    def eval(self, arg):
+        self._report(self._iteration, float(arg[1]))
+        self._iteration += 1
+        return [0]
