@@ -68,7 +68,9 @@ class HeldOut:
         e_b, e_a = ((q - self.q_rec) / s for q in (self.q_before, self.q_after))
         if signal_sigma is None:
             return np.sqrt(np.mean(e_b**2, axis=0)) - np.sqrt(np.mean(e_a**2, axis=0))
-        w = max(1, int(round(SIGNAL_WINDOW_S / max(float(np.median(np.diff(self.t))), 1e-12)))) if self.t.size > 1 else 1
+        # the phases of predict_before_after repeat times: the period is that of the distinct ones
+        period = np.diff(np.unique(self.t))
+        w = max(1, int(round(SIGNAL_WINDOW_S / float(np.median(period))))) if period.size else 1
         gains = np.zeros(e_b.shape[1])
         for k in range(e_b.shape[1]):
             m = np.maximum(running_rms(e_b[:, k], w), running_rms(e_a[:, k], w)) >= signal_sigma

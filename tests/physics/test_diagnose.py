@@ -255,6 +255,19 @@ def test_prediction_gain_is_counted_in_noise_sigmas_per_joint():
     assert h.gain_sigma(np.array([0.02, 0.2])) == pytest.approx(0.5)
 
 
+def test_pooled_phases_that_each_predicted_one_sample_are_judged_without_a_window_of_zero_period():
+    """predict_before_after pools its phases, so a span whose pieces each predicted one sample
+    holds the same time twice (a 2-DOF chain whose slider reached its stop 0.35 s into the
+    recording).  The running-RMS window was SIGNAL_WINDOW_S over the median time step, 0 there:
+    a 2.5e11-sample window, and diagnose died allocating 1.8 TiB.  With one distinct time the
+    window is one sample: the gain is the drop of the error where it exceeds the signal level."""
+    from kinemaforge_opt.physics.predict import HeldOut
+
+    q = np.zeros((2, 1))
+    h = HeldOut(np.array([0.34, 0.34]), q, q + 0.05, q + 0.01)
+    assert h.gain_sigma(np.array([0.01]), signal_sigma=3.0) == pytest.approx(4.0)
+
+
 def test_a_recording_too_sparse_to_simulate_reports_nothing_and_says_why(tmp_path):
     """At camera rate (the door's 30-Hz recording kept at 3.75 Hz, as a reconstruction's
     recording.csv can be) no piece of the fit span or of the held-out span holds the 8 samples a
