@@ -67,6 +67,7 @@ from ..errors import DataError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..nlp.joint_space import (
+    MIN_SAMPLES,
     fit_spans,
     friction_smoothing,
     join_recordings,
@@ -291,6 +292,12 @@ def diagnose(
     # the final model are fitted at the full rate.
     k_dec = search_decimation(fit_rec)
     srch = block_average(fit_rec, k_dec)
+    if srch.t.size < MIN_SAMPLES:
+        raise DataError(
+            f"the fit span is {fit_rec.t[-1] - fit_rec.t[0]:.3g} s, {srch.t.size} samples on the "
+            f"{1 / srch.dt:.0f}-Hz search grid: too few to identify anything (at least {MIN_SAMPLES}); "
+            f"the last {holdout_fraction:.0%} of the span is kept for held-out predictions"
+            + "".join(f"; {w}" for w in left_out))
     sigma_s = np.maximum(noise_std(srch.q), sigma_q / np.sqrt(k_dec))
 
     say("fitting the nominal model" if k_dec == 1 else

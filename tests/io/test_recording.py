@@ -73,3 +73,16 @@ def test_a_joint_without_a_tau_column_is_driven_by_nothing(tmp_path):
     path.write_text("t,q:theta,q:alpha,v:theta\n0,0,0,0\n0.1,0.1,0.1,1\n")
     with pytest.raises(InputFileError, match=r"v columns missing for joints \['alpha'\]"):
         read_recording(path)
+
+
+def test_a_span_too_short_for_the_search_grid_is_named_with_its_length(tmp_path, capsys):
+    """30 samples at 100 Hz: enough to calibrate, but diagnose keeps the last quarter for
+    held-out predictions and searches on ~33-Hz block means, 7 samples.  The message gives the
+    span's length and its samples on that grid (it said "recording has 7 samples" of a 30-row CSV)."""
+    path = tmp_path / "short.csv"
+    path.write_text("t,q:hinge\n" + "".join(f"{0.01 * i},{0.5 + 0.02 * i}\n" for i in range(30)))
+    assert cli_main(["diagnose", LAPTOP, str(path), "--no-drift", "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert re.search(r"error: the fit span is 0\.2\d s, [0-9] samples on the 3\d-Hz search grid: too few to identify "
+                     r"anything \(at least 10\); the last 25% of the span is kept for held-out predictions", err), err
+    assert not (tmp_path / "out").exists()
