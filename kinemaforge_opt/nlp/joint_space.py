@@ -165,15 +165,20 @@ def _rest_acceleration(model: ArticulatedModel, rec: Recording, samples: int) ->
 
 
 def between_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
-    """The longest stretch of the recording clear of the stops that the model itself declares
-    (its URDF limits, within max(5 noise sigma, 1 % of the range)).  Contact with a known stop is
-    nominal physics, not a mismatch, and carries nothing about the joint's dynamics; the model has
-    no law for the stop's force, so a lid resting shut under its weight before a hand lifts it was
-    "explained" by a spring holding it up.  In contact: a joint back at a stop after it had moved
-    clear (an arrival), and a start resting on one pressed into it.  A part merely resting there
-    at the start, nothing pressing it (a door before the hand pushes it open), is kept: its
-    breakaway tells friction.  A drawer pulled against its stop and pushed back keeps the longer of
-    the two strokes (the first alone was read before)."""
+    """The recording without its stretches in contact with the stops that the model itself
+    declares (its URDF limits, within max(5 noise sigma, 1 % of the range)).  Contact with a known
+    stop is nominal physics, not a mismatch, and carries nothing about the joint's dynamics; the
+    model has no law for the stop's force, so a lid resting shut under its weight before a hand
+    lifts it was "explained" by a spring holding it up.  In contact: a joint back at a stop after
+    it had moved clear (an arrival), and a start resting on one pressed into it.  A part merely
+    resting there at the start, nothing pressing it (a door before the hand pushes it open), is
+    kept: its breakaway tells friction.
+
+    Every stretch clear of contact of MIN_CLEAR_SAMPLES or more is kept, each a piece of its own:
+    what is left out between two is a gap (:func:`recording_gaps`; the fits, derivatives and
+    predictions do not carry the dynamics across it).  A drawer pulled against its stop and pushed
+    back keeps both strokes; two doors that each hit their stops in turn keep each push (the
+    longest clear stretch alone was read before: of a refrigerator's 12 s, 3.3 s)."""
     sigma = measurement_sigma(rec.q)
     contact = np.zeros(rec.t.size, dtype=bool)
     for k, j in enumerate(model.movable_joints):
@@ -198,16 +203,39 @@ def between_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
                 contact[: int(pressed[-1]) + 1] = True
     if not contact.any():
         return rec
-    # the longest run of samples out of contact: [start, end)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], (~contact).astype(int), [0]])))
-    runs = edges.reshape(-1, 2)
-    start, end = (max(runs, key=lambda r: r[1] - r[0]) if runs.size else (0, 0))
-    if end - start < 20:
+    runs = _clear_runs(contact)
+    if not runs:
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], (~contact).astype(int), [0]]))).reshape(-1, 2)
+        start, end = max(edges, key=lambda r: r[1] - r[0]) if edges.size else (0, 0)
         where = f"from {rec.t[start] - rec.t[0]:.2f} to {rec.t[end - 1] - rec.t[0]:.2f} s (samples {start}–{end - 1})" \
             if end > start else "at no time"
         raise DataError(f"the recording stays clear of the joint stops the model declares at most {where}; "
                         "too little motion to fit")
-    return rec.window(rec.t[start], rec.t[end - 1])
+    keep = np.zeros(rec.t.size, dtype=bool)
+    for a, b in runs:
+        keep[a:b] = True
+    return Recording(rec.t[keep], rec.joint_names, rec.q[keep], None if rec.v is None else rec.v[keep],
+                     None if rec.tau is None else rec.tau[keep])
+
+
+MIN_CLEAR_SAMPLES = 20
+"""The fewest samples of a stretch clear of the model's stops that a fit reads (a shorter one is
+left out with the contact around it)."""
+
+
+def _clear_runs(contact: np.ndarray) -> list[tuple[int, int]]:
+    """The [start, end) runs of samples out of ``contact`` (T,) kept as pieces: MIN_CLEAR_SAMPLES
+    or more, and after a left-out stretch of fewer than GAP_INTERVALS samples the next run starts
+    later, so that what is left out is a gap (:func:`recording_gaps`), never bridged."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], (~contact).astype(int), [0]]))).reshape(-1, 2)
+    runs: list[tuple[int, int]] = []
+    least_hole = int(np.floor(GAP_INTERVALS)) + 1  # samples left out so the interval across exceeds GAP_INTERVALS
+    for a, b in edges:
+        if runs and a - runs[-1][1] < least_hole:
+            a = runs[-1][1] + least_hole
+        if b - a >= MIN_CLEAR_SAMPLES:
+            runs.append((int(a), int(b)))
+    return runs
 
 
 def fit_span(model: ArticulatedModel, recording: Recording) -> tuple[Recording, tuple[str, ...]]:
@@ -219,8 +247,10 @@ def fit_span(model: ArticulatedModel, recording: Recording) -> tuple[Recording, 
     rec = between_nominal_stops(model, clean)
     notes = [spike_words(spikes)] if spikes else []
     if rec.t.size < clean.t.size:
-        notes.append(f"only {rec.t[0] - whole.t[0]:.3g}–{rec.t[-1] - whole.t[0]:.3g} s of the "
-                     f"{whole.t[-1] - whole.t[0]:.3g}-s recording was fitted: the rest is a joint pressed on, or "
+        pieces = [f"{rec.t[a] - whole.t[0]:.3g}–{rec.t[b - 1] - whole.t[0]:.3g} s" for a, b in stretches(rec.t)]
+        listed = pieces[0] if len(pieces) == 1 else ", ".join(pieces[:-1]) + " and " + pieces[-1]
+        notes.append(f"only {listed} of the {whole.t[-1] - whole.t[0]:.3g}-s recording "
+                     f"{'was' if len(pieces) == 1 else 'were'} fitted: the rest is a joint pressed on, or "
                      "reaching, a stop the model declares, whose force the model has no law for")
     return rec, tuple(notes)
 
