@@ -10,7 +10,7 @@ import numpy as np
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
 from ..model.pinocchio import forward_dynamics, inverse_dynamics, link_inverse_dynamics
-from ..nlp.joint_space import measurement_sigma
+from ..nlp.joint_space import measurement_sigma, stretches
 from .effects import EFFECTS
 from .locate import inverse_dynamics_residual
 from .search import Trial
@@ -23,7 +23,10 @@ def limit_stop_guess(model: ArticulatedModel, rec: Recording) -> dict[str, tuple
     mean over the extreme's samples let one noisy sample outweigh an impact).  Only samples after
     the motion first leaves an extreme's band count for it: a recording that starts at rest at
     one end of its motion has not met a stop there (a drawer driven shut from its start onto a
-    stop: the start's residual, differentiation noise at the edge, chose the start's end)."""
+    stop: the start's residual, differentiation noise at the edge, chose the start's end).  So has
+    a piece of the recording between gaps (:func:`~kinemaforge_opt.nlp.joint_space.stretches`)
+    that starts there: one that begins as the part leaves the model's own stop still carries that
+    stop's push in its first samples."""
     force, q, _, _ = inverse_dynamics_residual(model, rec)
     sigma = measurement_sigma(rec.q)
     out = {}
@@ -35,8 +38,10 @@ def limit_stop_guess(model: ArticulatedModel, rec: Recording) -> dict[str, tuple
         extremes = ((1.0, qk >= hi - band, qk < hi - away), (-1.0, qk <= lo + band, qk > lo + away))
         push = {}
         for side, near, far in extremes:
-            left = np.flatnonzero(far)
-            arrived = near & (np.arange(qk.size) > left[0]) if left.size else near
+            arrived = np.zeros_like(near)
+            for a, b in stretches(rec.t):
+                left = np.flatnonzero(far[a:b])
+                arrived[a:b] = near[a:b] & (np.arange(b - a) > left[0]) if left.size else near[a:b]
             push[side] = -side * float(np.sum(force[arrived, k])) if arrived.any() else -np.inf
         if not np.isfinite(max(push.values())):  # the motion never left either band
             push = {side: -side * float(np.sum(force[near, k])) for side, near, _ in extremes}
