@@ -5,7 +5,7 @@ Per case and method: the effect types reported, true positives (type match), fal
 missed effects, the relative value error of each true positive, and the held-out RMS of the
 prediction before (nominal model) and after (augmented with what the method found): on the last
 quarter of the recording, and on the case's second recording (:func:`.recordings.other_recording`,
-another hand plan, never shown to a method) over its longest stretch clear of the nominal stops
+another hand plan, never shown to a method) over its stretches clear of the nominal stops
 (:func:`~kinemaforge_opt.nlp.joint_space.between_nominal_stops`), predicted in
 ``OTHER_SEGMENT_S`` pieces each from its own least-squares state.  A concealed
 ``limit_contact`` whose stop the motion never reached is not in the truth set (nothing in the

@@ -59,7 +59,7 @@ def discovery_tables(summary: dict, cases: list[dict]) -> str:
             "at or above it even the truth does not fit the recording better than the nominal model by "
             "diagnose's selection margin.  Held-out RMS [rad or m]: the last quarter of the recording "
             "(mostly a free coast), and a second recording of the same system under another hand plan "
-            "(`bench.recordings.heldout_plan`, never shown to a method), its longest stretch clear of the nominal stops, "
+            "(`bench.recordings.heldout_plan`, never shown to a method), its stretches clear of the nominal stops, "
             "predicted in 2-s pieces each from its own least-squares state.\n\n"
             f"### Per case\n\n{_table(per_head, per)}\n")
 
