@@ -168,8 +168,8 @@ def test_calibrate_keeps_the_energy_books_of_a_long_two_joint_swing_without_a_de
     soft penalty) on the free Furuta swing: 2001 samples × 2 joints.  Both dampings come out
     within 1 % and inside their intervals, Coulomb friction nil.  While each 1-s window's energy
     residual summed its 250 intervals inside one row, that row touched 1000 states: the
-    constraint Jacobian took one sweep per state and this fit ran for 16 minutes; the books kept as a running
-    sum along the grid take ~17 s here."""
+    constraint Jacobian took one sweep per state, and this fit had not finished after 25 minutes
+    (stopped there); the books kept as a running sum along the grid take ~17 s."""
     nominal, rec = _free_furuta_swing()
     cal = calibrate(nominal, rec)
     assert cal.success, cal.status
