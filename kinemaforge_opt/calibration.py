@@ -38,7 +38,10 @@ _UNITS = {
 @dataclass(frozen=True)
 class Estimate:
     """A fitted parameter block: value, nominal (prior) and 95 % interval, element-wise
-    (shape (size,)); for an axis, ``ci95_angle_rad`` is the 95 % bound of its direction error."""
+    (shape (size,)); for an axis, ``ci95_angle_rad`` is the 95 % bound of its direction error.
+    ``determined`` False: the block is part of a combination the recording cannot determine (the
+    calibration's identifiability words name it); its interval is then no bound at all, and
+    ``to_dict`` gives it as null."""
 
     name: str
     value: np.ndarray
@@ -47,15 +50,23 @@ class Estimate:
     ci95_high: np.ndarray
     unit: str
     ci95_angle_rad: float | None = None
+    determined: bool = True
 
     def to_dict(self) -> dict:
         d = {
             "name": self.name, "value": self.value.tolist(), "nominal": self.nominal.tolist(),
-            "ci95": [self.ci95_low.tolist(), self.ci95_high.tolist()], "unit": self.unit,
+            "ci95": [self.ci95_low.tolist(), self.ci95_high.tolist()] if self.determined else None,
+            "unit": self.unit, "determined": self.determined,
         }
         if self.ci95_angle_rad is not None:
-            d["ci95_angle_rad"] = self.ci95_angle_rad
+            d["ci95_angle_rad"] = self.ci95_angle_rad if self.determined else None
         return d
+
+    def interval_text(self) -> str:
+        """"v [lo, hi]" per element (", "-joined), or "v (undetermined)"."""
+        if not self.determined:
+            return ", ".join(f"{v:.4g}" for v in self.value) + " (undetermined: see the notes)"
+        return ", ".join(f"{v:.4g} [{a:.4g}, {b:.4g}]" for v, a, b in zip(self.value, self.ci95_low, self.ci95_high))
 
 
 @dataclass(frozen=True)
@@ -190,6 +201,8 @@ def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: floa
     n = model.nq
     words: list[str] = []
     sens = fit_sensitivity(fit, X, z) if z.size else None
+    # blocks in a combination the data cannot determine ("hinge.axis[tilt 0]" -> "hinge.axis")
+    undetermined = {label.split("[")[0] for combo in (sens.unidentifiable if sens else ()) for label in combo}
     estimates, values, offset = {}, {}, 0
     for b in fit.blocks:
         zb = z[offset : offset + b.size]
@@ -205,20 +218,33 @@ def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: floa
         joint_or_link = b.name.rsplit(".", 1)[0]
         linear = joint_or_link in model.joint_names and model.joint(joint_or_link).type == "prismatic"
         unit = _UNITS.get(field, ("", ""))[1 if linear else 0]
-        estimates[b.name] = Estimate(b.name, value, b.nominal, value - 1.96 * sd, value + 1.96 * sd, unit, angle)
+        estimates[b.name] = Estimate(b.name, value, b.nominal, value - 1.96 * sd, value + 1.96 * sd, unit, angle,
+                                     determined=b.name not in undetermined)
         values[b.name] = value
         offset += b.size
     if sens is not None:
+        tilts: dict[str, int] = {}  # axis block -> its undetermined directions
         for combo in sens.unidentifiable:
+            blocks = {k.split("[")[0] for k in combo}
+            if len(blocks) == 1 and all("[tilt" in k for k in combo):
+                axis = blocks.pop()
+                tilts[axis] = tilts.get(axis, 0) + 1
+                continue
             names = ", ".join(f"{k} ({w:+.2f})" for k, w in combo.items())
             words.append(
                 f"this recording cannot determine the combination {names}: only directions orthogonal to it "
                 "are fitted (e.g. without applied forces, friction and damping are known only relative to inertia)"
             )
+        for axis, n_dirs in tilts.items():
+            which = "in any direction" if n_dirs > 1 else "in one direction"
+            words.append(
+                f"this recording cannot determine {axis} {which}: tilting it so changes the motion by nothing "
+                "to first order (e.g. a hinge turned about the vertical meets gravity alike)"
+            )
         for name, e in estimates.items():
             half = (e.ci95_high - e.ci95_low) / 2
             rel = half / np.maximum(np.abs(e.value), 1e-12)
-            if e.value.size == 1 and rel[0] > 1.0 and not name.endswith(".axis"):
+            if e.value.size == 1 and rel[0] > 1.0 and not name.endswith(".axis") and e.determined:
                 words.append(f"{name} is poorly determined: {e.value[0]:.4g} ± {half[0]:.2g} {e.unit}")
     X = X[:, :: fit.substeps]
     rms = np.sqrt(np.mean((X[:n, :].T - rec.q) ** 2, axis=0))

@@ -49,7 +49,7 @@ def test_calibrate_door_example_recovers_the_hidden_physics(tmp_path):
     tilt = ConcealedEffect("axis_tilt", "door_joint", np.deg2rad(3.0), (("azimuth", 0.6),))
     true_axis = true_model(door, (tilt,)).joint("door_joint").axis
     out = _run("03_calibrate_door.py", "-o", str(tmp_path))
-    assert "costs       output_q, energy" in out and "constraints dynamics, unit_axis:door_joint" in out
+    assert "costs       output_q, energy" in out and "constraints dynamics, energy_books, unit_axis:door_joint" in out
     for energy in ("soft", "hard"):
         doc = json.loads((tmp_path / f"calibration_{energy}.json").read_text())
         assert doc["success"], (energy, doc["status"])

@@ -80,9 +80,7 @@ def run(args) -> int:
     write_urdf(cal.model, out / "model.urdf")
     write_text_atomic(out / "calibration.json", json.dumps(cal.to_dict(), indent=2))
     for name, e in cal.estimates.items():
-        lo, hi = e.ci95_low, e.ci95_high
-        vals = ", ".join(f"{v:.4g} [{a:.4g}, {b:.4g}]" for v, a, b in zip(e.value, lo, hi))
-        print(f"  {name:28s} {vals} {e.unit}")
+        print(f"  {name:28s} {e.interval_text()} {e.unit}")
     for line in cal.identifiability:
         print(f"  note: {line}")
     print(f"{'converged' if cal.success else 'NOT converged: ' + cal.status}; wrote {out}/model.urdf, {out}/calibration.json")

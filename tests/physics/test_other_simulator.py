@@ -426,6 +426,21 @@ def test_calibrate_separates_inertia_and_damping_only_under_a_recorded_force():
 
 
 
+def test_a_horizontal_hinge_whose_tilt_the_swing_cannot_show_is_reported_undetermined():
+    """A rod swinging on a horizontal hinge, the hinge's axis freed: turning the axis about the
+    vertical is a symmetry of gravity, and tilting it out of the horizontal weakens gravity by
+    cos(tilt), a second-order change.  Neither tilt has first-order information, so the axis has
+    no interval (it printed ±4e135); the report says so in words, and the damping beside it is
+    still measured."""
+    cal = calibrate(_pendulum(0.01), _swing(_pendulum(0.03)), free=["hinge.axis", "hinge.damping"])
+    axis, damping = cal.estimates["hinge.axis"], cal.estimates["hinge.damping"]
+    assert not axis.determined and axis.to_dict()["ci95"] is None and axis.to_dict()["ci95_angle_rad"] is None
+    assert "undetermined" in axis.interval_text()
+    assert any("cannot determine hinge.axis in any direction" in w for w in cal.identifiability), cal.identifiability
+    assert damping.determined and damping.ci95_low[0] <= 0.03 <= damping.ci95_high[0]
+    assert damping.value[0] == pytest.approx(0.03, rel=0.02)
+
+
 def test_a_recording_stamped_in_unix_time_is_diagnosed_alike():
     """Logged recordings carry epoch timestamps (~1.7e9 s), where float64 resolves ~0.2 µs: the
     last prediction piece ended at t[-1] + 1e-9, which rounds to t[-1], so the last sample fell
