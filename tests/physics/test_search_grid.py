@@ -149,7 +149,8 @@ def test_static_friction_on_one_door_of_two_is_fitted_whatever_the_pre_screen_sa
     friction 0.3 N·m on the right one, which the hand's ~0.8 N·m barely pushes and friction holds
     still between pushes.  The linear pre-screen's smooth sign column is noise where the door is
     held, so with two joints' hypotheses screened to five the right door's Coulomb friction was
-    never fitted: damping 0.19 + an inertia error + a stop at 0.90 rad were reported for it."""
+    never fitted: damping 0.19 + an inertia error + a stop at 0.90 rad were reported for it.
+    (Forcing friction alone let it beat a drawer chest's unfitted damping: both are fitted.)"""
     obj = make_object("cabinet", 1)
     left, right = obj.model.joint_names
     effects = (E("viscous_damping", left, 0.5), E("coulomb_friction", right, 0.3))
@@ -158,4 +159,21 @@ def test_static_friction_on_one_door_of_two_is_fitted_whatever_the_pre_screen_sa
     d = diagnose(obj.model, rec)
     found = {(e.joint, e.type): e.value for e in d.effects}
     assert found == pytest.approx({(left, "viscous_damping"): 0.5, (right, "coulomb_friction"): 0.3}, rel=0.05), \
+        d.summary()
+
+
+def test_a_drawer_chests_damping_is_fitted_beside_the_friction_every_round_fits():
+    """A MuJoCo chest of two drawers (60 Hz): damping 5 N·s/m on the first, Coulomb friction 2 N
+    on the second.  The pre-screen ranked the first drawer's damping below five other hypotheses;
+    when each round fitted every joint's Coulomb friction but not its damping, the friction won
+    the round and was reported (0.53 N) for the damping.  Both are fitted now.  The second
+    drawer's friction is not reported: its pushes come after the first drawer came back to rest
+    inside its closed stop's band, which the fit leaves out (NOTES: a stay at a stop)."""
+    obj = make_object("drawer", 2)
+    first, second = obj.model.joint_names
+    effects = (E("viscous_damping", first, 5.0), E("coulomb_friction", second, 2.0))
+    ep = simulate(obj.model, obj.handles, effects, plan=HandPlan(goals=(0.6, 0.2)), record_hz=60)
+    rec = Recording(ep.t, ep.joint_names, ep.q + np.random.default_rng(0).normal(0, NOISE, ep.q.shape), tau=ep.tau)
+    d = diagnose(obj.model, rec)
+    assert {(e.joint, e.type): e.value for e in d.effects} == pytest.approx({(first, "viscous_damping"): 5.0}, rel=0.02), \
         d.summary()
