@@ -12,6 +12,7 @@ from kinemaforge_opt.nlp.joint_space import without_spikes
 from kinemaforge_opt.physics.diagnose import diagnose
 
 from .test_other_simulator import _drake_recording
+from .test_search_grid import _two_parts_diagnosed
 
 GLITCHES = ((40, 0.15), (95, -0.2), (150, 0.1))  # (sample, jump [rad]): 50–100 noise sigmas
 
@@ -73,16 +74,7 @@ def test_two_doors_that_hit_their_stops_in_turn_are_read_between_every_contact()
     the fridge door Coulomb friction 0.3 N·m.  Read over the longest stretch clear of every stop
     alone (4.45–7.78 s of 12 s), damping 0.27 on the fridge door and an axis tilt on the freezer
     door were reported; read over every clear stretch, each a piece of its own, both are found."""
-    from kinemaforge_opt.synth.effects import ConcealedEffect as E
-    from kinemaforge_opt.synth.groundtruth import HandPlan, simulate
-    from kinemaforge_opt.synth.objects import make_object
-
-    obj = make_object("refrigerator", 0)
-    freezer, fridge = obj.model.joint_names
-    effects = (E("viscous_damping", freezer, 0.5), E("coulomb_friction", fridge, 0.3))
-    ep = simulate(obj.model, obj.handles, effects, plan=HandPlan(goals=(0.6, 0.2)), record_hz=60)
-    rec = Recording(ep.t, ep.joint_names, ep.q + np.random.default_rng(0).normal(0, 2e-3, ep.q.shape), tau=ep.tau)
-    d = diagnose(obj.model, rec)
+    d, freezer, fridge = _two_parts_diagnosed("refrigerator", 0, 0.5, 0.3, 60)
     found = {(e.joint, e.type): e.value for e in d.effects}
     assert found == pytest.approx({(freezer, "viscous_damping"): 0.5, (fridge, "coulomb_friction"): 0.3}, rel=0.05), \
         d.summary()

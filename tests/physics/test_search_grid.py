@@ -144,6 +144,18 @@ def test_a_stiff_stop_barely_touched_is_found_where_it_is():
     assert d.effects[0].value == pytest.approx(0.2, abs=0.005)
 
 
+def _two_parts_diagnosed(category: str, seed: int, damping: float, friction: float, record_hz: int):
+    """(diagnosis, first joint, second joint) of the MuJoCo object ``category`` ``seed`` with two
+    joints, viscous ``damping`` on the first and Coulomb ``friction`` on the second, each pushed
+    to 60 % and then 20 % of its range in turn, recorded at ``record_hz`` with encoder noise."""
+    obj = make_object(category, seed)
+    first, second = obj.model.joint_names
+    effects = (E("viscous_damping", first, damping), E("coulomb_friction", second, friction))
+    ep = simulate(obj.model, obj.handles, effects, plan=HandPlan(goals=(0.6, 0.2)), record_hz=record_hz)
+    rec = Recording(ep.t, ep.joint_names, ep.q + np.random.default_rng(0).normal(0, NOISE, ep.q.shape), tau=ep.tau)
+    return diagnose(obj.model, rec), first, second
+
+
 def test_static_friction_on_one_door_of_two_is_fitted_whatever_the_pre_screen_says():
     """A MuJoCo double-door cabinet (30 Hz): damping 0.5 N·m·s/rad on the left door, Coulomb
     friction 0.3 N·m on the right one, which the hand's ~0.8 N·m barely pushes and friction holds
@@ -151,12 +163,7 @@ def test_static_friction_on_one_door_of_two_is_fitted_whatever_the_pre_screen_sa
     held, so with two joints' hypotheses screened to five the right door's Coulomb friction was
     never fitted: damping 0.19 + an inertia error + a stop at 0.90 rad were reported for it.
     (Forcing friction alone let it beat a drawer chest's unfitted damping: both are fitted.)"""
-    obj = make_object("cabinet", 1)
-    left, right = obj.model.joint_names
-    effects = (E("viscous_damping", left, 0.5), E("coulomb_friction", right, 0.3))
-    ep = simulate(obj.model, obj.handles, effects, plan=HandPlan(goals=(0.6, 0.2)), record_hz=30)
-    rec = Recording(ep.t, ep.joint_names, ep.q + np.random.default_rng(0).normal(0, NOISE, ep.q.shape), tau=ep.tau)
-    d = diagnose(obj.model, rec)
+    d, left, right = _two_parts_diagnosed("cabinet", 1, 0.5, 0.3, 30)
     found = {(e.joint, e.type): e.value for e in d.effects}
     assert found == pytest.approx({(left, "viscous_damping"): 0.5, (right, "coulomb_friction"): 0.3}, rel=0.05), \
         d.summary()
@@ -169,11 +176,6 @@ def test_a_drawer_chests_damping_is_fitted_beside_the_friction_every_round_fits(
     the round and was reported (0.53 N) for the damping.  Both are fitted now.  The second
     drawer's friction is not reported: its pushes come after the first drawer came back to rest
     inside its closed stop's band, which the fit leaves out (NOTES: a stay at a stop)."""
-    obj = make_object("drawer", 2)
-    first, second = obj.model.joint_names
-    effects = (E("viscous_damping", first, 5.0), E("coulomb_friction", second, 2.0))
-    ep = simulate(obj.model, obj.handles, effects, plan=HandPlan(goals=(0.6, 0.2)), record_hz=60)
-    rec = Recording(ep.t, ep.joint_names, ep.q + np.random.default_rng(0).normal(0, NOISE, ep.q.shape), tau=ep.tau)
-    d = diagnose(obj.model, rec)
+    d, first, _ = _two_parts_diagnosed("drawer", 2, 5.0, 2.0, 60)
     assert {(e.joint, e.type): e.value for e in d.effects} == pytest.approx({(first, "viscous_damping"): 5.0}, rel=0.02), \
         d.summary()
