@@ -544,20 +544,13 @@ class EffectSearch:
         ``screen`` best of the linear pre-screen, plus those the previous round's NLP fits found
         strong (the linear ranking is weak once an effect is in: its column absorbs what
         collinear ones would explain); all of them in a ``whole`` round (a selection round, not
-        a swap) of at most FIT_WHOLE_ROUND.  A selection round also fits every joint's viscous
-        damping and Coulomb friction, the dissipation nearly every joint has, which the linear
-        ranking misjudges: its smooth sign column is noise where a part is held still, so the
-        force holding it explains nothing (a double-door cabinet's door with 0.3 N·m of friction,
-        never fitted, was read as damping + an inertia error + a stop), and forcing friction alone
-        let it win a round where damping, ranked below five others, went unfitted (a drawer
-        chest's damping of 5 N·s/m read as Coulomb friction 0.53 N)."""
+        a swap) of at most FIT_WHOLE_ROUND."""
         if self.screen is None or len(pending) <= self.screen or (whole and len(pending) <= FIT_WHOLE_ROUND):
             return pending
         scores = screen_scores(self.model, pending, keep, self.r_nom, self.id_force, self.q_s, self.v_s, self.eps,
                                self.v_scale, self.stops)
         top = sorted(pending, key=lambda je: scores[je])[: self.screen]
-        return [je for je in pending if je in top or je in strong_before
-                or (whole and je[1] in ("viscous_damping", "coulomb_friction"))]
+        return [je for je in pending if je in top or je in strong_before]
 
     def select(self, max_effects: int) -> None:
         """Forward selection by ΔBIC with an effect-size floor, the prediction gate for effects
