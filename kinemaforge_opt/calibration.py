@@ -63,7 +63,7 @@ class Estimate:
         return d
 
     def interval_text(self) -> str:
-        """"v [lo, hi]" per element (", "-joined), or "v (undetermined)"."""
+        """"v [lo, hi]" per element (", "-joined), or the values and "(undetermined: see the notes)"."""
         if not self.determined:
             return ", ".join(f"{v:.4g}" for v in self.value) + " (undetermined: see the notes)"
         return ", ".join(f"{v:.4g} [{a:.4g}, {b:.4g}]" for v, a, b in zip(self.value, self.ci95_low, self.ci95_high))
