@@ -205,8 +205,8 @@ def between_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
         return rec
     runs = _clear_runs(contact)
     if not runs:
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], (~contact).astype(int), [0]]))).reshape(-1, 2)
-        start, end = max(edges, key=lambda r: r[1] - r[0]) if edges.size else (0, 0)
+        free = _free_runs(contact)
+        start, end = max(free, key=lambda r: r[1] - r[0]) if free.size else (0, 0)
         where = f"from {rec.t[start] - rec.t[0]:.2f} to {rec.t[end - 1] - rec.t[0]:.2f} s (samples {start}–{end - 1})" \
             if end > start else "at no time"
         raise DataError(f"the recording stays clear of the joint stops the model declares at most {where}; "
@@ -214,8 +214,7 @@ def between_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
     keep = np.zeros(rec.t.size, dtype=bool)
     for a, b in runs:
         keep[a:b] = True
-    return Recording(rec.t[keep], rec.joint_names, rec.q[keep], None if rec.v is None else rec.v[keep],
-                     None if rec.tau is None else rec.tau[keep])
+    return rec.rows(keep)
 
 
 MIN_CLEAR_SAMPLES = 20
@@ -223,14 +222,18 @@ MIN_CLEAR_SAMPLES = 20
 left out with the contact around it)."""
 
 
+def _free_runs(contact: np.ndarray) -> np.ndarray:
+    """(R, 2) the [start, end) runs of samples out of ``contact`` (T,), in order."""
+    return np.flatnonzero(np.diff(np.concatenate([[0], (~contact).astype(int), [0]]))).reshape(-1, 2)
+
+
 def _clear_runs(contact: np.ndarray) -> list[tuple[int, int]]:
     """The [start, end) runs of samples out of ``contact`` (T,) kept as pieces: MIN_CLEAR_SAMPLES
     or more, and after a left-out stretch of fewer than GAP_INTERVALS samples the next run starts
     later, so that what is left out is a gap (:func:`recording_gaps`), never bridged."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], (~contact).astype(int), [0]]))).reshape(-1, 2)
     runs: list[tuple[int, int]] = []
     least_hole = int(np.floor(GAP_INTERVALS)) + 1  # samples left out so the interval across exceeds GAP_INTERVALS
-    for a, b in edges:
+    for a, b in _free_runs(contact):
         if runs and a - runs[-1][1] < least_hole:
             a = runs[-1][1] + least_hole
         if b - a >= MIN_CLEAR_SAMPLES:
