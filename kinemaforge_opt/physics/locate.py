@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import savgol_filter
+from scipy.signal import savgol_coeffs, savgol_filter
 
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
@@ -65,13 +65,29 @@ def running_rms(x: np.ndarray, w: int) -> np.ndarray:
     return np.sqrt(np.convolve(x**2, np.ones(w) / w, mode="same"))
 
 
+def _window_samples(dt: float, window_s: float | None) -> int:
+    """The odd Savitzky–Golay window [samples] of ``window_s`` (default DERIVATIVE_WINDOW_S) at
+    sample period ``dt`` [s], at least 7."""
+    return max(7, int(round((window_s or DERIVATIVE_WINDOW_S) / dt)) | 1)
+
+
+def velocity_noise(sigma_q: np.ndarray, dt: float, window_s: float | None = None, block: int = 1) -> np.ndarray:
+    """(n,) standard deviation [rad/s or m/s] of :func:`smooth_derivatives`' velocity under white
+    position noise ``sigma_q`` (n,) sampled every ``dt`` [s], inside a stretch: the derivative
+    filter's gain (the norm of its coefficients), for means over blocks of ``block`` samples (the
+    search grid, :func:`block_means`) the norm of the block-averaged filter."""
+    c = savgol_coeffs(_window_samples(dt, window_s), 3, deriv=1, delta=dt)
+    c = np.convolve(c, np.ones(block) / block)
+    return np.asarray(sigma_q, dtype=float) * float(np.linalg.norm(c))
+
+
 def smooth_derivatives(rec: Recording, window_s: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Savitzky–Golay (cubic) q, v, a (each (T, n)) from the recorded q; window ``window_s``
     (default DERIVATIVE_WINDOW_S), at least 7 samples.  Each stretch between gaps in the recording
     (:func:`~kinemaforge_opt.nlp.joint_space.recording_gaps`) on its own: a window across a gap
     reads its jump as motion."""
     dt = rec.dt
-    w = max(7, int(round((window_s or DERIVATIVE_WINDOW_S) / dt)) | 1)
+    w = _window_samples(dt, window_s)
     q, v, a = np.array(rec.q, dtype=float), np.zeros_like(rec.q), np.zeros_like(rec.q)
     for i, j in stretches(rec.t):
         ww = min(w, (j - i) - 1 + (j - i) % 2)  # the longest odd window the stretch holds

@@ -97,13 +97,14 @@ def inertia_columns(model: ArticulatedModel, q: np.ndarray, v: np.ndarray, a: np
     return np.stack([shares[k][:, k] for k in range(len(joints))], axis=1)
 
 
-def stribeck_speeds(v: np.ndarray, eps: float, n: int = 12) -> np.ndarray:
+def stribeck_speeds(v: np.ndarray, eps: float, slowest: float = 0.0, n: int = 12) -> np.ndarray:
     """Candidate Stribeck speeds [rad/s or m/s] for a joint moving at speeds ``v`` (T,): a
-    geometric grid from twice the smooth-sign width ``eps`` (a Stribeck speed below it has no
-    shape the fit can see) to half the peak speed (above it the excess never fades within the
-    recording: Coulomb friction by another name; the NLP's bound)."""
+    geometric grid from twice the smooth-sign width ``eps`` and the ``slowest`` speed that counts
+    as moving (:func:`moving_speed`; a Stribeck speed below either has no shape the regression
+    sees: its column is ~0 on every moving sample) to half the peak speed (above it the excess never fades within the recording: Coulomb friction by another
+    name; the NLP's bound)."""
     hi = 0.5 * float(np.max(np.abs(v)))
-    lo = min(max(2.0 * eps, 1e-3), hi)
+    lo = min(max(2.0 * eps, 1e-3, slowest), hi)
     return np.geomspace(lo, hi, n) if hi > lo else np.array([hi])
 
 
@@ -119,6 +120,25 @@ def _best_stribeck_speed(v: np.ndarray, r: np.ndarray, eps: float, base: list[np
         return float(np.sum((r - A @ np.linalg.lstsq(A, r, rcond=None)[0]) ** 2))
 
     return float(min(grid, key=left))
+
+
+# A sample counts as moving for the pre-screen when its smoothed speed is above this share of the
+# joint's RMS speed and this many of the speed's noise sigmas: below either, the direction of
+# motion (dry friction's sign) is noise, and a friction column there "explains" nothing but costs
+# its squares (a door with Coulomb friction 0.3 N·m recorded at 60 Hz with 2 mm of noise: 5 % of
+# its RMS speed is 0.03 rad/s, its speed's noise 0.04 rad/s, and the Coulomb column, ±1 at rest,
+# ranked below damping, drag, tilt, inertia and a spring).  The linear starts keep the share
+# alone: from the faster samples only, a drawer's Coulomb friction started at 5.0 N for 3.0 N
+# (its damping's force folded in) and its fit fell to 0, and a spring's start sent a Drake door's
+# stop + spring pair to IPOPT's cap.
+MOVING_SHARE = 0.05
+MOVING_SIGMA = 3.0
+
+
+def moving_speed(v_scale: float, v_noise: float) -> float:
+    """The slowest speed [rad/s or m/s] that counts as moving: MOVING_SHARE × the joint's RMS
+    speed ``v_scale``, at least MOVING_SIGMA × its noise ``v_noise``."""
+    return max(MOVING_SHARE * v_scale, MOVING_SIGMA * v_noise)
 
 
 def linear_init(model: ArticulatedModel, joint: str, effect: str, start: Trial, r_nom: np.ndarray,
@@ -188,18 +208,20 @@ def _columns(model: ArticulatedModel, joint: str, effect: str, q: np.ndarray, v:
 
 def screen_scores(model: ArticulatedModel, pending: list[tuple[str, str]], selected: list[tuple[str, str]],
                   r_nom: np.ndarray, id_force: np.ndarray, q: np.ndarray, v: np.ndarray, eps: np.ndarray,
-                  v_scale: np.ndarray, stops: dict) -> dict[tuple[str, str], float]:
+                  v_scale: np.ndarray, v_noise: np.ndarray, stops: dict) -> dict[tuple[str, str], float]:
     """Per hypothesis, the share of the nominal inverse-dynamics residual on its joint (moving
-    samples) that the already selected effects on that joint leave and the hypothesis removes
-    too, by joint linear least squares on their force columns (:func:`_columns`; a Stribeck
+    samples, above :func:`moving_speed` for the RMS speeds ``v_scale`` and speed noise
+    ``v_noise`` (n,)) that the already selected effects on that joint leave and the hypothesis
+    removes too, by joint linear least squares on their force columns (:func:`_columns`; a Stribeck
     column at the speed of :func:`stribeck_speeds` that explains most); lower = explains
     more.  A cheap ranking, not evidence: the chosen hypotheses are then fitted by the NLP."""
     out = {}
     for joint, effect in pending:
         k = model.joint_index(joint)
-        moving = np.abs(v[:, k]) > 0.05 * v_scale[k]
+        slowest = moving_speed(v_scale[k], v_noise[k])
+        moving = np.abs(v[:, k]) > slowest
         rk, vk, ek = r_nom[moving, k], v[moving, k], float(eps[k])
-        grid = stribeck_speeds(v[:, k], ek)  # a Stribeck column at the speed that explains most
+        grid = stribeck_speeds(v[:, k], ek, slowest)  # a Stribeck column at the speed that explains most
         base = [c[moving] for j, e in selected if j == joint
                 for c in _columns(model, j, e, q, v, id_force, eps, v_scale, stops,
                                   _best_stribeck_speed(vk, rk, ek, [], grid) if e == "stribeck_friction" else None)]

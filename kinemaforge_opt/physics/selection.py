@@ -16,7 +16,7 @@ from ..model.articulated import ArticulatedModel
 from ..model.pinocchio import build_pin_model, joint_space_inertia
 from ..nlp.joint_space import build_joint_space_fit, match_recording, velocity_estimate
 from ..parallel import process_map
-from .locate import THRESHOLD_SIGMA, block_means, inverse_dynamics_residual, motion_window
+from .locate import THRESHOLD_SIGMA, block_means, inverse_dynamics_residual, motion_window, velocity_noise
 from .predict import HeldOut, predict_before_after, prediction_signal
 from .prescreen import STOP_START, inertia_columns, limit_stop_guess, linear_init, screen_scores, stop_ramp_fraction
 from .search import CPU_CAP_STATUS, HypothesisFit, Trial, effect_parameters
@@ -305,7 +305,9 @@ class EffectSearch:
         # then block means (full-rate accelerations alone are mostly differentiated noise, which
         # the inertia column would "explain" too)
         block = max(1, int(round(srch.dt / fit_rec.dt)))
-        self.r_nom, self.q_s, self.v_s, a_s = inverse_dynamics_residual(model, fit_rec, motion_window(fit_rec), block)
+        window_s = motion_window(fit_rec)
+        self.r_nom, self.q_s, self.v_s, a_s = inverse_dynamics_residual(model, fit_rec, window_s, block)
+        self.v_noise = velocity_noise(sigma_q, fit_rec.dt, window_s, block)
         self.id_force = inertia_columns(model, self.q_s, self.v_s, a_s,
                                         block_means(fit_rec.tau, block, fit_rec.t) if self.forced else None)
         self.nominal_model = _model_of(model, self.nominal_trial, self.stops)
@@ -548,7 +550,7 @@ class EffectSearch:
         if self.screen is None or len(pending) <= self.screen or (whole and len(pending) <= FIT_WHOLE_ROUND):
             return pending
         scores = screen_scores(self.model, pending, keep, self.r_nom, self.id_force, self.q_s, self.v_s, self.eps,
-                               self.v_scale, self.stops)
+                               self.v_scale, self.v_noise, self.stops)
         top = sorted(pending, key=lambda je: scores[je])[: self.screen]
         return [je for je in pending if je in top or je in strong_before]
 

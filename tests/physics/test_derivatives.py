@@ -1,5 +1,6 @@
 """The derivatives behind the inverse-dynamics residual (physics.locate): the Savitzky–Golay
-window follows the motion's speed, checked against analytic derivatives of sinusoids."""
+window follows the motion's speed, checked against analytic derivatives of sinusoids; the
+velocity's noise level against the spread of smoothed white noise."""
 
 from __future__ import annotations
 
@@ -7,7 +8,9 @@ import numpy as np
 import pytest
 
 from kinemaforge_opt.io.recording import Recording
-from kinemaforge_opt.physics.locate import DERIVATIVE_WINDOW_S, block_means, motion_window, smooth_derivatives
+from kinemaforge_opt.physics.locate import (
+    DERIVATIVE_WINDOW_S, block_means, motion_window, smooth_derivatives, velocity_noise,
+)
 
 
 def _sine(freq_hz: float, rate_hz: float = 250.0, seconds: float = 4.0) -> tuple[Recording, np.ndarray]:
@@ -53,3 +56,15 @@ def test_block_means_do_not_straddle_a_gap():
     a = t[:, None] * 10.0
     np.testing.assert_allclose(block_means(t, 2, t), [0.5, 2.5, 20.5, 22.5])
     np.testing.assert_allclose(block_means(a, 2, t)[:, 0], [5.0, 25.0, 205.0, 225.0])
+
+
+@pytest.mark.parametrize("rate_hz, block", [(60.0, 1), (100.0, 3), (250.0, 1)])
+def test_the_velocity_noise_level_is_the_spread_of_smoothed_white_noise(rate_hz, block):
+    """``velocity_noise`` (the derivative filter's gain) against the standard deviation of the
+    smoothed velocity of 20 000 samples of white noise, block-averaged as on a search grid."""
+    sigma = 2e-3
+    t = np.arange(20000) / rate_hz
+    rec = Recording(t, ("j",), np.random.default_rng(3).normal(0.0, sigma, (t.size, 1)))
+    v = smooth_derivatives(rec)[1][50:-50]
+    measured = float(np.std(block_means(v, block)))
+    assert velocity_noise(np.array([sigma]), 1.0 / rate_hz, block=block)[0] == pytest.approx(measured, rel=0.03)

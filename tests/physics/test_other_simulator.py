@@ -22,9 +22,11 @@ from kinemaforge_opt.calibration import calibrate
 from kinemaforge_opt.io.recording import Recording
 from kinemaforge_opt.model import ArticulatedModel, Inertial, Joint, JointDynamics, JointLimits, Link, read_urdf
 from kinemaforge_opt.model.pinocchio import build_pin_model, inverse_dynamics
-from kinemaforge_opt.nlp.joint_space import between_nominal_stops, friction_smoothing
+from kinemaforge_opt.nlp.joint_space import between_nominal_stops, friction_smoothing, measurement_sigma
 from kinemaforge_opt.physics.diagnose import diagnose
-from kinemaforge_opt.physics.locate import JointMismatch, block_means, inverse_dynamics_residual, motion_window
+from kinemaforge_opt.physics.locate import (
+    JointMismatch, block_means, inverse_dynamics_residual, motion_window, velocity_noise,
+)
 from kinemaforge_opt.physics.prescreen import inertia_columns, limit_stop_guess, screen_scores
 from kinemaforge_opt.physics.selection import CANDIDATES
 from kinemaforge_opt.synth.objects import make_object
@@ -374,10 +376,12 @@ def test_the_inertia_column_does_not_explain_acceleration_noise():
     rec = Recording(forcing.t, model.joint_names, q, tau=forcing.tau)
     r, q_s, v_s, a_s = inverse_dynamics_residual(model, rec, motion_window(rec), 3)
     v_scale = np.sqrt(np.mean(v_s**2, axis=0))
+    v_noise = velocity_noise(measurement_sigma(rec.q), rec.dt, motion_window(rec), 3)
     eps, stops = friction_smoothing(rec), limit_stop_guess(model, rec)
 
     def share(columns):
-        scores = screen_scores(model, [(joint.name, "inertia_error")], [], r, columns, q_s, v_s, eps, v_scale, stops)
+        scores = screen_scores(model, [(joint.name, "inertia_error")], [], r, columns, q_s, v_s, eps, v_scale, v_noise,
+                               stops)
         return 1.0 - scores[(joint.name, "inertia_error")]
 
     assert share(inverse_dynamics(model, q_s, v_s, a_s)) > 0.5  # the measured accelerations' column
