@@ -391,9 +391,10 @@ def test_the_inertia_column_does_not_explain_acceleration_noise():
 def test_an_effect_on_one_joint_of_two_is_judged_on_that_joint():
     """A 4-kg drawer with damping 3 N·s/m beside a door the model gets right (cabinet_multi 0):
     the simulation check pooled the two joints' errors, the door's diluted the drawer's gain to
-    0.81σ and dropped a damping of ΔBIC −977.  The linear pre-screen ranks this damping 10th of
-    18 (the drawer's M·a noise, ~2 N at 30 Hz, dwarfs its 0.2 N), so it is found only because the
-    hypotheses the ranking put first explain nothing and the rest are then fitted."""
+    0.81σ and dropped a damping of ΔBIC −977.  The linear pre-screen ranked this damping 10th of
+    18 (the drawer's M·a noise, ~2 N at 30 Hz, dwarfs its 0.2 N), and it was found only because the
+    hypotheses the ranking put first explained nothing and the rest were then fitted; reading as
+    moving only the samples above the speed's noise (``prescreen.moving_speed``), it ranks 3rd."""
     obj = make_object("cabinet_multi", 0)
     door, drawer = obj.model.movable_joints
     names = obj.model.joint_names
