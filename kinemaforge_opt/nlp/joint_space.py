@@ -164,6 +164,36 @@ def _rest_acceleration(model: ArticulatedModel, rec: Recording, samples: int) ->
     return forward_dynamics(model, q, v, tau + model.passive_forces(q, v))
 
 
+def stop_contact(model: ArticulatedModel, rec: Recording) -> np.ndarray:
+    """(T, n) True where a joint of ``model`` is in contact with a stop the model declares (its
+    URDF limits, within max(5 noise sigma, 1 % of the range)) along ``rec``: back at a stop after
+    it had moved clear (an arrival), or at the start resting on one and pressed into it
+    (:func:`between_nominal_stops`)."""
+    sigma = measurement_sigma(rec.q)
+    contact = np.zeros(rec.q.shape, dtype=bool)
+    for k, j in enumerate(model.movable_joints):
+        lim = j.limits
+        if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
+            continue
+        tol = max(5 * sigma[k], 0.01 * (lim.upper - lim.lower))
+        # an arrival counts once the joint has been clear of both stops, beyond twice the band (a
+        # slow start wanders in and out of the band's edge; summing |Δq| would count noise as motion)
+        q = rec.q[:, k]
+        near = (q <= lim.lower + tol) | (q >= lim.upper - tol)
+        clear = (q > lim.lower + 2 * tol) & (q < lim.upper - 2 * tol)
+        contact[:, k] = np.maximum.accumulate(clear) & near
+        if near[0] and clear.any():  # starts on a stop and leaves it
+            resting = int(np.argmax(~near))
+            side = -1.0 if q[0] <= lim.lower + tol else 1.0
+            # pressed: the nominal model would have moved it into the stop by more than the noise
+            # within the time it rested there, so the stop's force held it
+            held = 2.0 * sigma[k] / max(rec.t[resting] - rec.t[0], rec.t[1] - rec.t[0]) ** 2
+            pressed = np.flatnonzero(side * _rest_acceleration(model, rec, resting)[:, k] > held)
+            if pressed.size:  # up to the last sample pressed into the stop
+                contact[: int(pressed[-1]) + 1, k] = True
+    return contact
+
+
 def between_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
     """The recording without its stretches in contact with the stops that the model itself
     declares (its URDF limits, within max(5 noise sigma, 1 % of the range)).  Contact with a known
@@ -179,28 +209,7 @@ def between_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
     predictions do not carry the dynamics across it).  A drawer pulled against its stop and pushed
     back keeps both strokes; two doors that each hit their stops in turn keep each push (the
     longest clear stretch alone was read before: of a refrigerator's 12 s, 3.3 s)."""
-    sigma = measurement_sigma(rec.q)
-    contact = np.zeros(rec.t.size, dtype=bool)
-    for k, j in enumerate(model.movable_joints):
-        lim = j.limits
-        if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
-            continue
-        tol = max(5 * sigma[k], 0.01 * (lim.upper - lim.lower))
-        # an arrival counts once the joint has been clear of both stops, beyond twice the band (a
-        # slow start wanders in and out of the band's edge; summing |Δq| would count noise as motion)
-        q = rec.q[:, k]
-        near = (q <= lim.lower + tol) | (q >= lim.upper - tol)
-        clear = (q > lim.lower + 2 * tol) & (q < lim.upper - 2 * tol)
-        contact |= np.maximum.accumulate(clear) & near
-        if near[0] and clear.any():  # starts on a stop and leaves it
-            resting = int(np.argmax(~near))
-            side = -1.0 if q[0] <= lim.lower + tol else 1.0
-            # pressed: the nominal model would have moved it into the stop by more than the noise
-            # within the time it rested there, so the stop's force held it
-            held = 2.0 * sigma[k] / max(rec.t[resting] - rec.t[0], rec.t[1] - rec.t[0]) ** 2
-            pressed = np.flatnonzero(side * _rest_acceleration(model, rec, resting)[:, k] > held)
-            if pressed.size:  # up to the last sample pressed into the stop
-                contact[: int(pressed[-1]) + 1] = True
+    contact = stop_contact(model, rec).any(axis=1)
     if not contact.any():
         return rec
     runs = _clear_runs(contact)
@@ -255,7 +264,42 @@ def fit_span(model: ArticulatedModel, recording: Recording) -> tuple[Recording, 
         notes.append(f"only {listed} of the {whole.t[-1] - whole.t[0]:.3g}-s recording "
                      f"{'was' if len(pieces) == 1 else 'were'} fitted: the rest is a joint pressed on, or "
                      "reaching, a stop the model declares, whose force the model has no law for")
+        notes += held_motion_words(model, clean, np.isin(clean.t, rec.t, invert=True))
     return rec, tuple(notes)
+
+
+# A joint's motion left out of the fit is worth naming when it travels at least this many noise
+# sigmas (and HELD_MOTION_SHARE of its recorded range) in the samples left out while clear of its
+# own stops.
+HELD_MOTION_SIGMA = 10.0
+HELD_MOTION_SHARE = 0.05
+
+
+def held_motion_words(model: ArticulatedModel, rec: Recording, left_out: np.ndarray) -> list[str]:
+    """Words for each joint that moves in the samples of ``rec`` marked ``left_out`` (T,) while
+    clear of its own stops, with the joints in contact with a stop there: the fit reads a
+    recording only where no joint touches a declared stop, so such motion (a drawer pulled while
+    a door rests open against its stop) is not fitted at all."""
+    contact = stop_contact(model, rec)
+    sigma = measurement_sigma(rec.q)
+    runs = _free_runs(~left_out)  # the stretches left out, each on its own
+    out = []
+    for k, name in enumerate(model.joint_names):
+        least = max(HELD_MOTION_SIGMA * sigma[k], HELD_MOTION_SHARE * float(np.ptp(rec.q[:, k])))
+        moved, holders = [], set()
+        for a, b in runs:
+            own = np.arange(a, b)[~contact[a:b, k]]
+            if own.size > 1 and np.ptp(rec.q[own, k]) >= least:
+                moved.append((own[0], own[-1]))
+                holders |= {i for i in range(len(model.joint_names)) if i != k and contact[own, i].any()}
+        if not moved or not holders:
+            continue
+        spans = ", ".join(f"{rec.t[i] - rec.t[0]:.3g}–{rec.t[j] - rec.t[0]:.3g} s" for i, j in moved)
+        held = " and ".join(model.joint_names[i] for i in sorted(holders))
+        out.append(f"{name} moves in {spans} while {held} {'rests' if len(holders) == 1 else 'rest'} on a stop: "
+                   "that motion is not fitted (a joint held at its stop while another moves is not modelled yet); "
+                   "record it with the other joints clear of their stops")
+    return out
 
 
 def fit_spans(model: ArticulatedModel, recordings: Recording | Sequence[Recording]

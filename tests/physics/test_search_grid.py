@@ -163,7 +163,8 @@ def test_a_drawer_chests_damping_ranked_low_by_the_pre_screen_is_fitted_when_not
     fitted every joint's Coulomb friction found that strong, never fitted the damping and
     reported friction 0.53 N for it: NOTES, 2026-11-29.)  The second drawer's friction is not
     reported: its pushes come after the first drawer came back to rest inside its closed stop's
-    band, which the fit leaves out (NOTES: a stay at a stop)."""
-    d, first, _ = _two_parts_diagnosed("drawer", 2, 5.0, 2.0, 60)
+    band, which the fit leaves out (NOTES: a stay at a stop); the summary says so, naming both."""
+    d, first, second = _two_parts_diagnosed("drawer", 2, 5.0, 2.0, 60)
     assert {(e.joint, e.type): e.value for e in d.effects} == pytest.approx({(first, "viscous_damping"): 5.0}, rel=0.02), \
         d.summary()
+    assert f"{second} moves in 4.15–12 s while {first} rests on a stop: that motion is not fitted" in d.summary()
