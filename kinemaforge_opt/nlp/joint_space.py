@@ -289,10 +289,11 @@ def held_motion_words(model: ArticulatedModel, rec: Recording, left_out: np.ndar
         moved, holders = [], set()
         for a, b in runs:
             own = np.arange(a, b)[~contact[a:b, k]]
-            if own.size > 1 and np.ptp(rec.q[own, k]) >= least:
+            others = {i for i in range(len(model.joint_names)) if i != k and contact[own, i].any()}
+            if own.size > 1 and np.ptp(rec.q[own, k]) >= least and others:
                 moved.append((own[0], own[-1]))
-                holders |= {i for i in range(len(model.joint_names)) if i != k and contact[own, i].any()}
-        if not moved or not holders:
+                holders |= others
+        if not moved:
             continue
         spans = ", ".join(f"{rec.t[i] - rec.t[0]:.3g}–{rec.t[j] - rec.t[0]:.3g} s" for i, j in moved)
         held = " and ".join(model.joint_names[i] for i in sorted(holders))
