@@ -101,8 +101,8 @@ def stribeck_speeds(v: np.ndarray, eps: float, slowest: float = 0.0, n: int = 12
     """Candidate Stribeck speeds [rad/s or m/s] for a joint moving at speeds ``v`` (T,): a
     geometric grid from twice the smooth-sign width ``eps`` and the ``slowest`` speed that counts
     as moving (:func:`moving_speed`; a Stribeck speed below either has no shape the regression
-    sees: its column is ~0 on every moving sample) to half the peak speed (above it the excess never fades within the recording: Coulomb friction by another
-    name; the NLP's bound)."""
+    sees: its column is ~0 on every moving sample) to half the peak speed (above it the excess
+    never fades within the recording: Coulomb friction by another name; the NLP's bound)."""
     hi = 0.5 * float(np.max(np.abs(v)))
     lo = min(max(2.0 * eps, 1e-3, slowest), hi)
     return np.geomspace(lo, hi, n) if hi > lo else np.array([hi])

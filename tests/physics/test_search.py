@@ -145,28 +145,3 @@ def test_linear_prescreen_keeps_the_concealed_effects():
     assert {e.joint for e in d.effects} == {joint}
     assert sum("type" in t for t in d.tested) < 9 * 2  # fewer fits than one full round
 
-
-def _two_doors(hz: int):
-    """MuJoCo's double-door cabinet (cabinet 1): the left door with damping 0.5 N·m·s/rad, the
-    right with Coulomb friction 0.3 N·m; each pushed open, left to rest, pushed shut (9 s, most
-    of it at rest), 2 mm of noise."""
-    obj = make_object("cabinet", 1)
-    left, right = obj.model.joint_names
-    effects = (E("viscous_damping", left, 0.5), E("coulomb_friction", right, 0.3))
-    ep = simulate(obj.model, obj.handles, effects, plan=HandPlan(goals=(0.6, 0.2)), record_hz=hz)
-    q = ep.q + np.random.default_rng(0).normal(0.0, NOISE, ep.q.shape)
-    return obj.model, left, right, Recording(ep.t, ep.joint_names, q, tau=ep.tau)
-
-
-def test_dry_friction_of_a_door_at_rest_most_of_the_time_is_found_beside_the_other_doors_damping():
-    """The pre-screen reads a sample as moving only above its speed's noise
-    (``prescreen.moving_speed``): at rest the smoothed speed's sign is noise, a Coulomb column
-    there is ±1 against a residual it cannot explain, and the right door's friction ranked
-    below damping, drag, tilt, inertia and a spring; it was never fitted, and the door was
-    reported with damping, an inertia error and a stop (held-out gain 5×)."""
-    model, left, right, rec = _two_doors(60)
-    d = diagnose(model, rec)
-    found = {(e.joint, e.type): e.value for e in d.effects}
-    assert set(found) == {(left, "viscous_damping"), (right, "coulomb_friction")}, d.summary()
-    assert found[(left, "viscous_damping")] == pytest.approx(0.5, rel=0.05)
-    assert found[(right, "coulomb_friction")] == pytest.approx(0.3, rel=0.05)
