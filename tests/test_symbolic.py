@@ -11,6 +11,7 @@ from factories import random_tree
 from kinemaforge_opt.errors import MissingDynamicsError, UnknownNameError
 from kinemaforge_opt.model import ArticulatedModel, Joint, Link, urdf_string
 from kinemaforge_opt.model.pinocchio import build_pin_model
+from kinemaforge_opt.nlp.joint_space import locked_accelerations
 from kinemaforge_opt.symbolic import available_parameters, build_dynamics
 
 SEEDS = range(6)
@@ -70,6 +71,41 @@ def test_bridge_matches_pinocchio_urdf_parser(seed, tmp_path):
         assert float(dyn.potential_energy(q, dyn.theta0)) == pytest.approx(
             pin.computePotentialEnergy(pm, pd, qp), abs=1e-9
         )
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_locked_accelerations_equal_pinocchios_reduced_model(seed, tmp_path):
+    """Joints held still by their stops (``locked_accelerations``) against Pinocchio's own model
+    with those joints welded at their positions (``buildReducedModel`` on the parsed URDF): the
+    free joints' accelerations agree whether the held joint is a parent, a child or a sibling of
+    the moving ones, and the held joints' are zero."""
+    rng = np.random.default_rng(300 + seed)
+    model = random_tree(rng, n_joints=5, kinds=("revolute", "prismatic"))
+    path = tmp_path / "m.urdf"
+    path.write_text(urdf_string(model))
+    pm = pin.buildModelFromUrdf(str(path))
+    for j in model.movable_joints:
+        pm.armature[pm.joints[pm.getJointId(j.name)].idx_v] = j.dynamics.armature
+    idx = [pm.joints[pm.getJointId(n)].idx_q for n in model.joint_names]
+    dyn = build_dynamics(model)
+    for _ in range(3):
+        lock = (rng.uniform(size=model.nq) < 0.4).astype(float)
+        lock[int(rng.integers(model.nq))] = 0.0  # something moves
+        q, v, tau = rng.normal(size=(3, model.nq))
+        v[lock > 0] = 0.0  # a held joint stands still
+        a = np.asarray(locked_accelerations(dyn, ca.DM(q), ca.DM(v), ca.DM(tau), dyn.theta0, ca.DM(lock))).ravel()
+        q_full = np.zeros(pm.nq)
+        q_full[idx] = q
+        held_ids = [pm.getJointId(n) for n, l in zip(model.joint_names, lock) if l > 0]
+        reduced = pin.buildReducedModel(pm, held_ids, q_full)
+        free = [n for n, l in zip(model.joint_names, lock) if l == 0]
+        ridx = [reduced.joints[reduced.getJointId(n)].idx_q for n in free]
+        qr, vr, tr = (np.zeros(reduced.nq) for _ in range(3))
+        k_free = [model.joint_names.index(n) for n in free]
+        qr[ridx], vr[ridx], tr[ridx] = q[k_free], v[k_free], tau[k_free]
+        a_ref = pin.aba(reduced, reduced.createData(), qr, vr, tr)[ridx]
+        np.testing.assert_allclose(a[k_free], a_ref, atol=1e-8)
+        np.testing.assert_allclose(a[lock > 0], 0.0, atol=1e-12)
 
 
 @pytest.mark.parametrize("seed", range(3))

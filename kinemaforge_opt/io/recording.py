@@ -21,6 +21,10 @@ class Recording:
 
     t: (T,) strictly increasing times [s].  joint_names: the n recorded joints.
     q: (T, n) positions [rad or m]; v: (T, n) velocities or None; tau: (T, n) applied forces or None.
+    held: (T, n) True where a joint rests on a stop of the model that holds it still while others
+    move, or None (none is): an annotation of the fit span
+    (:func:`~kinemaforge_opt.nlp.joint_space.between_nominal_stops`), not a column of the file;
+    fits and simulations hold such a joint still with the stop's force, whatever it is.
     """
 
     t: np.ndarray
@@ -28,6 +32,7 @@ class Recording:
     q: np.ndarray
     v: np.ndarray | None = None
     tau: np.ndarray | None = None
+    held: np.ndarray | None = None
 
     def __post_init__(self):
         t = np.asarray(self.t, dtype=float)
@@ -52,6 +57,11 @@ class Recording:
                     f"recording {field}:{self.joint_names[c]} is not finite at row {r} (t={t[r]:.4g} s)"
                 )
             object.__setattr__(self, field, a)
+        if self.held is not None:
+            held = np.asarray(self.held, dtype=bool).reshape(t.size, -1)
+            if held.shape != (t.size, n):
+                raise DataError(f"recording held must have shape ({t.size}, {n}), got {held.shape}")
+            object.__setattr__(self, "held", held if held.any() else None)
 
     @property
     def dt(self) -> float:
@@ -66,7 +76,7 @@ class Recording:
                 raise UnknownNameError("recorded joint", name, self.joint_names)
             idx.append(self.joint_names.index(name))
         pick = lambda a: None if a is None else a[:, idx]  # noqa: E731
-        return Recording(self.t, tuple(joint_names), self.q[:, idx], pick(self.v), pick(self.tau))
+        return Recording(self.t, tuple(joint_names), self.q[:, idx], pick(self.v), pick(self.tau), pick(self.held))
 
     def window(self, t_start: float, t_end: float) -> "Recording":
         """Samples with t_start <= t <= t_end."""
@@ -75,7 +85,14 @@ class Recording:
     def rows(self, keep: np.ndarray) -> "Recording":
         """The samples where the (T,) mask ``keep`` is true."""
         pick = lambda a: None if a is None else a[keep]  # noqa: E731
-        return Recording(self.t[keep], self.joint_names, self.q[keep], pick(self.v), pick(self.tau))
+        return Recording(self.t[keep], self.joint_names, self.q[keep], pick(self.v), pick(self.tau), pick(self.held))
+
+    def locks(self) -> np.ndarray:
+        """(T - 1, n) True for each sample interval over which a joint is held (:attr:`held` at
+        both its ends): the interval's dynamics hold that joint still."""
+        if self.held is None:
+            return np.zeros((self.t.size - 1, len(self.joint_names)), dtype=bool)
+        return self.held[:-1] & self.held[1:]
 
 
 def read_recording(path: str | os.PathLike) -> Recording:

@@ -164,6 +164,12 @@ def _rest_acceleration(model: ArticulatedModel, rec: Recording, samples: int) ->
     return forward_dynamics(model, q, v, tau + model.passive_forces(q, v))
 
 
+def _stop_band(rec: Recording, k: int, lim) -> float:
+    """How close [rad or m] joint ``k`` of ``rec`` comes to a stop of its ``limits`` to touch it:
+    max(5 noise sigma, 1 % of the range)."""
+    return max(5 * float(measurement_sigma(rec.q[:, k:k + 1])[0]), 0.01 * (lim.upper - lim.lower))
+
+
 def stop_contact(model: ArticulatedModel, rec: Recording) -> np.ndarray:
     """(T, n) True where a joint of ``model`` is in contact with a stop the model declares (its
     URDF limits, within max(5 noise sigma, 1 % of the range)) along ``rec``: back at a stop after
@@ -175,7 +181,7 @@ def stop_contact(model: ArticulatedModel, rec: Recording) -> np.ndarray:
         lim = j.limits
         if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
             continue
-        tol = max(5 * sigma[k], 0.01 * (lim.upper - lim.lower))
+        tol = _stop_band(rec, k, lim)
         # an arrival counts once the joint has been clear of both stops, beyond twice the band (a
         # slow start wanders in and out of the band's edge; summing |Δq| would count noise as motion)
         q = rec.q[:, k]
@@ -194,24 +200,73 @@ def stop_contact(model: ArticulatedModel, rec: Recording) -> np.ndarray:
     return contact
 
 
+# A joint in contact with a stop is held there while its smoothed speed stays within this many
+# of the speed's noise sigmas (an impact or a push off the stop is faster) and its position within
+# REST_SIGMA noise sigmas of the contact band.
+HELD_SIGMA = 3.0
+REST_SIGMA = 4.0
+
+
+def held_on_stops(model: ArticulatedModel, rec: Recording, contact: np.ndarray) -> np.ndarray:
+    """(T, n) True where a joint rests on a stop: runs of MIN_CLEAR_SAMPLES or more samples in
+    which it is still (its Savitzky–Golay speed within HELD_SIGMA of that speed's noise, from its
+    measured position noise) and within REST_SIGMA position noise sigmas of the contact band,
+    their median inside the band, each inside a still stretch that was in ``contact`` (T, n) with
+    that stop (:func:`stop_contact`) at some sample.  Not only the contact samples: a part resting on its
+    stop sits on the band's edge (a MuJoCo drawer shut 1 cm off its limit, with 2 mm of noise,
+    was in the band at 61 % of its samples).  The samples of an arrival (the impact, a bounce)
+    and of a push off the stop read faster: the smoothing window spreads them over its width."""
+    from ..physics.locate import smooth_derivatives, velocity_noise  # physics.locate builds on this module
+
+    sigma = measurement_sigma(rec.q)
+    _, v, _ = smooth_derivatives(rec)
+    still = np.abs(v) <= HELD_SIGMA * velocity_noise(sigma, rec.dt)[None, :]
+    held = np.zeros_like(still)
+    for k, j in enumerate(model.movable_joints):
+        if not contact[:, k].any():
+            continue
+        lim, q = j.limits, rec.q[:, k]
+        band = _stop_band(rec, k, lim)
+        reach = band + REST_SIGMA * sigma[k]
+        near = (q <= lim.lower + reach) | (q >= lim.upper - reach)
+        for a, b in _free_runs(~still[:, k]):  # the still stretches
+            if contact[a:b, k].any():
+                held[a:b, k] = near[a:b]
+        for a, b in _free_runs(~held[:, k]):
+            # held: long enough to hold anything still, and resting in the band (a drawer stopped
+            # by its damping 1.4 cm short of its limit touched the band only with its noise)
+            rest = float(np.median(q[a:b]))
+            if b - a < MIN_CLEAR_SAMPLES or min(rest - lim.lower, lim.upper - rest) > band:
+                held[a:b, k] = False
+    return held
+
+
 def between_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
     """The recording without its stretches in contact with the stops that the model itself
-    declares (its URDF limits, within max(5 noise sigma, 1 % of the range)).  Contact with a known
-    stop is nominal physics, not a mismatch, and carries nothing about the joint's dynamics; the
-    model has no law for the stop's force, so a lid resting shut under its weight before a hand
-    lifts it was "explained" by a spring holding it up.  In contact: a joint back at a stop after
-    it had moved clear (an arrival), and a start resting on one pressed into it.  A part merely
-    resting there at the start, nothing pressing it (a door before the hand pushes it open), is
-    kept: its breakaway tells friction.
+    declares (its URDF limits, within max(5 noise sigma, 1 % of the range)), except where the
+    joints in contact are held still there while another joint is clear: those samples are kept
+    with :attr:`~kinemaforge_opt.io.recording.Recording.held` set for the held joints, whose
+    stop's force, whatever it is, keeps them still in the fits and simulations
+    (:func:`locked_accelerations`).  Contact with a known stop is nominal physics, not a
+    mismatch, and carries nothing about the joint's dynamics; the model has no law for the stop's
+    force, so a lid resting shut under its weight before a hand lifts it was "explained" by a
+    spring holding it up.  In contact: a joint back at a stop after it had moved clear (an
+    arrival), and a start resting on one pressed into it.  A part merely resting there at the
+    start, nothing pressing it (a door before the hand pushes it open), is kept free: its
+    breakaway tells friction.
 
-    Every stretch clear of contact of MIN_CLEAR_SAMPLES or more is kept, each a piece of its own:
-    what is left out between two is a gap (:func:`recording_gaps`; the fits, derivatives and
-    predictions do not carry the dynamics across it).  A drawer pulled against its stop and pushed
-    back keeps both strokes; two doors that each hit their stops in turn keep each push (the
-    longest clear stretch alone was read before: of a refrigerator's 12 s, 3.3 s)."""
-    contact = stop_contact(model, rec).any(axis=1)
-    if not contact.any():
+    Every stretch of MIN_CLEAR_SAMPLES or more kept is a piece of its own: what is left out
+    between two is a gap (:func:`recording_gaps`; the fits, derivatives and predictions do not
+    carry the dynamics across it).  A drawer pulled against its stop and pushed back keeps both
+    strokes; two doors that each hit their stops in turn keep each push (the longest clear
+    stretch alone was read before: of a refrigerator's 12 s, 3.3 s); a drawer pulled while a door
+    rests open on its stop is kept, the door held (that motion was left out before)."""
+    contact_j = stop_contact(model, rec)
+    if not contact_j.any():
         return rec
+    held = held_on_stops(model, rec, contact_j)
+    # left out: a joint striking, bouncing on or pushed off a stop, or every joint at a stop
+    contact = (contact_j & ~held).any(axis=1) | held.all(axis=1)
     runs = _clear_runs(contact)
     if not runs:
         free = _free_runs(contact)
@@ -223,7 +278,7 @@ def between_nominal_stops(model: ArticulatedModel, rec: Recording) -> Recording:
     keep = np.zeros(rec.t.size, dtype=bool)
     for a, b in runs:
         keep[a:b] = True
-    return rec.rows(keep)
+    return replace(rec, held=held).rows(keep)
 
 
 MIN_CLEAR_SAMPLES = 20
@@ -265,6 +320,13 @@ def fit_span(model: ArticulatedModel, recording: Recording) -> tuple[Recording, 
                      f"{'was' if len(pieces) == 1 else 'were'} fitted: the rest is a joint pressed on, or "
                      "reaching, a stop the model declares, whose force the model has no law for")
         notes += held_motion_words(model, clean, np.isin(clean.t, rec.t, invert=True))
+    if rec.held is not None:
+        for k, name in enumerate(model.joint_names):
+            if rec.held[:, k].any():
+                runs = [(rec.t[a] - whole.t[0], rec.t[b - 1] - whole.t[0]) for a, b in _free_runs(~rec.held[:, k])]
+                notes.append(f"{name} rests on a stop in " + ", ".join(f"{a:.3g}–{b:.3g} s" for a, b in runs)
+                             + " while another joint moves: the fit holds it still there (the stop's force, "
+                             "whatever it is, is not fitted)")
     return rec, tuple(notes)
 
 
@@ -278,8 +340,9 @@ HELD_MOTION_SHARE = 0.05
 def held_motion_words(model: ArticulatedModel, rec: Recording, left_out: np.ndarray) -> list[str]:
     """Words for each joint that moves in the samples of ``rec`` marked ``left_out`` (T,) while
     clear of its own stops, with the joints in contact with a stop there: the fit reads a
-    recording only where no joint touches a declared stop, so such motion (a drawer pulled while
-    a door rests open against its stop) is not fitted at all."""
+    recording only where every joint is clear of the declared stops or resting on one
+    (:func:`between_nominal_stops`), so motion while another joint strikes, creeps along or is
+    pushed off a stop is not fitted at all."""
     contact = stop_contact(model, rec)
     sigma = measurement_sigma(rec.q)
     runs = _free_runs(~left_out)  # the stretches left out, each on its own
@@ -297,9 +360,10 @@ def held_motion_words(model: ArticulatedModel, rec: Recording, left_out: np.ndar
             continue
         spans = ", ".join(f"{rec.t[i] - rec.t[0]:.3g}–{rec.t[j] - rec.t[0]:.3g} s" for i, j in moved)
         held = " and ".join(model.joint_names[i] for i in sorted(holders))
-        out.append(f"{name} moves in {spans} while {held} {'rests' if len(holders) == 1 else 'rest'} on a stop: "
-                   "that motion is not fitted (a joint held at its stop while another moves is not modelled yet); "
-                   "record it with the other joints clear of their stops")
+        out.append(f"{name} moves in {spans} while {held} {'touches' if len(holders) == 1 else 'touch'} a stop without "
+                   "resting on it (an impact, a creep along it, a push off it): that motion is not fitted (the stop's "
+                   "force is modelled only as holding a joint still); record it with the other joints clear of their "
+                   "stops or resting on them")
     return out
 
 
@@ -356,7 +420,9 @@ def join_recordings(recordings: Sequence[Recording]) -> Recording:
         return None if parts[0] is None else np.concatenate(parts)
 
     t = np.concatenate([r.t + s for r, s in zip(recordings, shifts)])
-    return Recording(t, first.joint_names, stack("q"), stack("v"), stack("tau"))
+    held = None if all(r.held is None for r in recordings) else \
+        np.concatenate([np.zeros(r.q.shape, dtype=bool) if r.held is None else r.held for r in recordings])
+    return Recording(t, first.joint_names, stack("q"), stack("v"), stack("tau"), held)
 
 
 def joined_words(spans: Sequence[Recording], joined: Recording) -> str:
@@ -448,6 +514,13 @@ def limit_side(model: ArticulatedModel, rec: Recording) -> dict[str, tuple[float
     return out
 
 
+def grid_locks(rec: Recording, m: int) -> np.ndarray:
+    """(n, (T - 1) m) the lock flags (1.0: held still by its stop) of each joint on each
+    collocation interval of ``rec``'s grid with ``m`` intervals per sample interval
+    (:meth:`~kinemaforge_opt.io.recording.Recording.locks`)."""
+    return np.repeat(rec.locks().T.astype(float), m, axis=1)
+
+
 def collocation_grid(t: np.ndarray, m: int) -> np.ndarray:
     """Collocation times [s] of sample times ``t`` (T,) with ``m`` equal intervals per sample
     interval: (m (T - 1) + 1,), the samples at every m-th point."""
@@ -479,6 +552,29 @@ def data_scales(model: ArticulatedModel, rec: Recording) -> DataScales:
         force=np.maximum(force, 1e-9),
         inertia=np.maximum(inertia, 1e-12),
     )
+
+
+def locked_accelerations(dyn: Dynamics, q, v, tau, theta, lock):
+    """Joint accelerations (n,) [rad/s² or m/s²] with the joints flagged in ``lock`` (n, 0 or 1)
+    held still by their stops, whatever force that takes (CasADi symbols; q, v, tau (n,), theta
+    the bridge's parameters).  The free joints' rows of M a = tau - h hold as they are (a stop's
+    force acts on its own joint's row only) and each held joint's row is replaced by a_j = 0:
+    (diag(1 - l) M + diag(l)) a = (1 - l) ∘ M a_free, where a_free = ABA(q, v, tau) gives
+    M a_free = tau - h.  Exact for any tree (a held parent carries its children as a fixed
+    base; a held child rides its moving parent), and a_free itself when nothing is held.
+    Pinocchio's reduced model (``buildReducedModel``) is the same system with the joint welded;
+    the bridge's CasADi functions take one model, so the weld is written here as a constraint.
+    M is assembled from RNEA columns, M e_j = RNEA(q, 0, e_j) - RNEA(q, 0, 0): Pinocchio's CRBA
+    assumes each subtree's joints are numbered consecutively (depth first), which a model's
+    joint order need not be (a random tree's M lost its couplings), while RNEA and ABA only need
+    parents before children."""
+    a_free = dyn.aba(q, v, tau, theta)
+    n = a_free.shape[0]
+    zero = ca.DM.zeros(n)
+    gravity = dyn.rnea(q, zero, zero, theta)
+    M = ca.horzcat(*[dyn.rnea(q, zero, ca.DM(np.eye(n)[:, j]), theta) - gravity for j in range(n)])
+    free = 1 - lock
+    return ca.solve(ca.diag(free) @ M + ca.diag(lock), free * (M @ a_free))
 
 
 @dataclass(frozen=True)
@@ -621,26 +717,30 @@ def build_joint_space_fit(
                 k += len(ps)
         return ca.vertcat(*tau)
 
-    def rhs(x, u):
+    holds = rec.held is not None  # some joint rests on a stop while another moves: the interval's lock flags count
+
+    def rhs(x, u, lock):
         q, v = x[:n], x[n:]
-        return ca.vertcat(v, dyn.aba(q, v, u + passive(q, v), theta)), ca.dot(u + passive(q, v), v)
+        force = u + passive(q, v)
+        a = locked_accelerations(dyn, q, v, force, theta, lock) if holds else dyn.aba(q, v, force, theta)
+        return ca.vertcat(v, a), ca.dot(force, v)
 
     def energy_of(x):
         q, v = x[:n], x[n:]
         return 0.5 * ca.dot(v, ca.mtimes(dyn.crba(q, theta), v)) + dyn.potential_energy(q, theta)
 
     xk, xk1 = ca.SX.sym("xk", 2 * n), ca.SX.sym("xk1", 2 * n)
-    uk, uk1, h = ca.SX.sym("uk", n), ca.SX.sym("uk1", n), ca.SX.sym("h")
-    fk, pk = rhs(xk, uk)
-    fk1, pk1 = rhs(xk1, uk1)
+    uk, uk1, h, lk = ca.SX.sym("uk", n), ca.SX.sym("uk1", n), ca.SX.sym("h"), ca.SX.sym("lock", n)
+    fk, pk = rhs(xk, uk, lk)
+    fk1, pk1 = rhs(xk1, uk1, lk)
     xm = (xk + xk1) / 2 + h / 8 * (fk - fk1)
-    fm, pm_ = rhs(xm, (uk + uk1) / 2)
+    fm, pm_ = rhs(xm, (uk + uk1) / 2, lk)
     defect = xk1 - xk - h / 6 * (fk + 4 * fm + fk1)
     work = h / 6 * (pk + 4 * pm_ + pk1)
     d_energy = energy_of(xk1) - energy_of(xk)
     interval = ca.Function(
-        "hermite_simpson", [xk, xk1, uk, uk1, h, theta, phi], [defect, work, d_energy],
-        ["xk", "xk1", "uk", "uk1", "h", "theta", "phi"], ["defect", "work", "dE"],
+        "hermite_simpson", [xk, xk1, uk, uk1, h, theta, phi, lk], [defect, work, d_energy],
+        ["xk", "xk1", "uk", "uk1", "h", "theta", "phi", "lock"], ["defect", "work", "dE"],
     )
 
     # --- the NLP ---------------------------------------------------------------------------
@@ -681,7 +781,7 @@ def build_joint_space_fit(
     U = np.array([np.interp(t_grid, rec.t, c) for c in rec.tau.T]) if rec.tau is not None else np.zeros((n, G))
     H = np.diff(t_grid)[None, :]
     mapped = interval.map(G - 1)
-    D, Wk, dE = mapped(X[:, :-1], X[:, 1:], U[:, :-1], U[:, 1:], H, theta_mx, phi_mx)
+    D, Wk, dE = mapped(X[:, :-1], X[:, 1:], U[:, :-1], U[:, 1:], H, theta_mx, phi_mx, grid_locks(rec, m))
     segment_starts = (0,)
     # no continuity across a cut (grid interval index): every segment_s, and at the last substep
     # of a gap in the recording (the gap's own nodes then end the segment before it, with no data)

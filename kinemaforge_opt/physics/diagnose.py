@@ -211,14 +211,16 @@ def search_decimation(rec: Recording) -> int:
 
 def block_average(rec: Recording, k: int) -> Recording:
     """``rec`` as means over consecutive blocks of ``k`` samples (t, q, v and tau alike; each
-    stretch between gaps on its own, its last incomplete block dropped).  k = 1 returns ``rec``."""
+    stretch between gaps on its own, its last incomplete block dropped; a joint is held in a block
+    held throughout).  k = 1 returns ``rec``."""
     if k <= 1:
         return rec
 
     def mean(a):
         return block_means(a, k, rec.t)
 
-    return Recording(mean(rec.t), rec.joint_names, mean(rec.q), mean(rec.v), mean(rec.tau))
+    held = None if rec.held is None else mean(rec.held.astype(float)) > 1.0 - 1e-9  # held throughout the block
+    return Recording(mean(rec.t), rec.joint_names, mean(rec.q), mean(rec.v), mean(rec.tau), held)
 
 
 def _split(rec: Recording, holdout_fraction: float, k: int | None) -> tuple[Recording, Recording | None]:

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
-from ..nlp.joint_space import recording_gaps
+from ..nlp.joint_space import locked_accelerations, recording_gaps
 from .locate import running_rms
 
 # Held-out prediction: each model's starting state is fitted over this first part of a span [s]
@@ -140,11 +140,14 @@ def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec:
     return HeldOut(*(np.concatenate(x) for x in zip(*parts)))
 
 
-def _dynamics_dae(model: ArticulatedModel, extra: dict | None) -> dict:
+def _dynamics_dae(model: ArticulatedModel, extra: dict | None, holds: bool = False) -> dict:
     """The CasADi DAE of ``model`` under a joint force linear in time between samples:
     x = (q, v) (2n,), u = (a, b) (2n,) with tau(t) = a + b t on an interval, ode = (v, ABA(q, v,
     tau + passive)); passive = the model's joint dynamics (the effect library's laws) plus the
-    ``extra`` laws f(q, v) per joint name, evaluated on CasADi symbols."""
+    ``extra`` laws f(q, v) per joint name, evaluated on CasADi symbols.  With ``holds``, u also
+    carries the interval's lock flags l (n,) (:meth:`~kinemaforge_opt.io.recording.Recording.locks`):
+    a held joint stands still on its stop (q' = 0, its velocity ignored) and the others move with
+    it held (:func:`~kinemaforge_opt.nlp.joint_space.locked_accelerations`)."""
     import casadi as ca
 
     from ..symbolic import build_dynamics
@@ -152,8 +155,10 @@ def _dynamics_dae(model: ArticulatedModel, extra: dict | None) -> dict:
 
     dyn = build_dynamics(model)
     n = model.nq
-    x, u, t = ca.SX.sym("x", 2 * n), ca.SX.sym("u", 2 * n), ca.SX.sym("t")
+    x, u, t = ca.SX.sym("x", 2 * n), ca.SX.sym("u", 3 * n if holds else 2 * n), ca.SX.sym("t")
     q, v = x[:n], x[n:]
+    if holds:
+        v = (1 - u[2 * n:]) * v
     passive = []
     for k, j in enumerate(model.movable_joints):
         f = 0
@@ -163,7 +168,8 @@ def _dynamics_dae(model: ArticulatedModel, extra: dict | None) -> dict:
         if (extra or {}).get(j.name) is not None:
             f += extra[j.name](q[k], v[k])
         passive.append(f)
-    a = dyn.aba(q, v, u[:n] + u[n:] * t + ca.vertcat(*passive), dyn.theta0)
+    tau = u[:n] + u[n: 2 * n] * t + ca.vertcat(*passive)
+    a = locked_accelerations(dyn, q, v, tau, dyn.theta0, u[2 * n:]) if holds else dyn.aba(q, v, tau, dyn.theta0)
     return {"x": x, "u": u, "t": t, "ode": ca.vertcat(v, a)}
 
 
@@ -215,11 +221,12 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
     from .locate import smooth_derivatives
 
     n = model.nq
-    dae = _dynamics_dae(model, extra)
+    holds = rec.held is not None
+    dae = _dynamics_dae(model, extra, holds)
     q0, v0, _ = smooth_derivatives(rec)
     tau = rec.tau if rec.tau is not None else np.zeros((rec.t.size, n))
     slope = np.diff(tau, axis=0) / np.diff(rec.t)[:, None]
-    U = np.hstack([tau[:-1] - slope * rec.t[:-1, None], slope]).T  # tau = a + b t per interval
+    U = np.hstack([tau[:-1] - slope * rec.t[:-1, None], slope] + ([rec.locks()] if holds else [])).T  # tau = a + b t per interval
     # max_step_size: one sample interval, so a force pulse after a free coast is never stepped
     # over; csparse: CVODES's default dense QR fails (too much work) on the 1e-156 entries the
     # stop's softplus puts in the Jacobian far from the stop

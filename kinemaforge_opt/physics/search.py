@@ -25,7 +25,7 @@ import numpy as np
 
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
-from ..nlp.joint_space import build_joint_space_fit, collocation_grid
+from ..nlp.joint_space import build_joint_space_fit, collocation_grid, grid_locks
 from .effects import EFFECTS
 
 # CPU budget of one hypothesis solve: this many derivative evaluations (timed at build), at least
@@ -133,16 +133,16 @@ class _StructuredNLP:
         phi = ca.vertcat(*phi_parts) if phi_parts else ca.SX(0, 1)
 
         xk, xk1 = ca.SX.sym("xk", nx), ca.SX.sym("xk1", nx)
-        uk, uk1, h = ca.SX.sym("uk", n), ca.SX.sym("uk1", n), ca.SX.sym("h")
+        uk, uk1, h, lk = ca.SX.sym("uk", n), ca.SX.sym("uk1", n), ca.SX.sym("h"), ca.SX.sym("lock", n)
         lam = ca.SX.sym("lam", nx)
-        d = fit.defect(xk, xk1, uk, uk1, h, theta, phi)[0]
+        d = fit.defect(xk, xk1, uk, uk1, h, theta, phi, lk)[0]
         wk = ca.vertcat(xk, xk1, zs)
         nb = 2 * nx + nz
         J = ca.densify(ca.jacobian(d, wk))
         H = ca.densify(ca.hessian(ca.dot(lam, d), wk)[0])
-        f_d = ca.Function("d", [xk, xk1, uk, uk1, h, zs], [d])
-        f_j = ca.Function("j", [xk, xk1, uk, uk1, h, zs], [J])
-        f_h = ca.Function("h", [xk, xk1, uk, uk1, h, zs, lam], [H])
+        f_d = ca.Function("d", [xk, xk1, uk, uk1, h, zs, lk], [d])
+        f_j = ca.Function("j", [xk, xk1, uk, uk1, h, zs, lk], [J])
+        f_h = ca.Function("h", [xk, xk1, uk, uk1, h, zs, lk, lam], [H])
         self.sizes = (f_d.n_instructions(), f_j.n_instructions(), f_h.n_instructions())
 
         U = np.array([np.interp(t_grid, rec.t, c) for c in rec.tau.T]) if rec.tau is not None else np.zeros((n, G))
@@ -157,8 +157,8 @@ class _StructuredNLP:
         X = ca.reshape(w[: nx * G], nx, G)
         z = w[nx * G:]
         Xa, Xb = X[:, kept.tolist()], X[:, (kept + 1).tolist()]
-        Ua, Ub, Hh = U[:, kept], U[:, kept + 1], Hs[kept][None, :]
-        D = f_d.map(K)(Xa, Xb, Ua, Ub, Hh, z)
+        Ua, Ub, Hh, Lock = U[:, kept], U[:, kept + 1], Hs[kept][None, :], grid_locks(rec, m)[:, kept]
+        D = f_d.map(K)(Xa, Xb, Ua, Ub, Hh, z, Lock)
         axis_blocks = [b for b in free_blocks if b.name.endswith(".axis")]
         g_parts = [ca.vec(D)]
         for b in axis_blocks:
@@ -181,7 +181,7 @@ class _StructuredNLP:
         # entry (r, c) of block i, column-major (r fastest): row nx i + r, column wcols[i, c]
         jr = np.broadcast_to(nx * np.arange(K)[:, None, None] + np.arange(nx)[None, None, :], (K, nb, nx)).ravel()
         jc = np.broadcast_to(wcols[:, :, None], (K, nb, nx)).ravel()
-        Jall = ca.vec(f_j.map(K)(Xa, Xb, Ua, Ub, Hh, z))  # (nx*nb*K,) column-major per block
+        Jall = ca.vec(f_j.map(K)(Xa, Xb, Ua, Ub, Hh, z, Lock))  # (nx*nb*K,) column-major per block
         extra_r, extra_c, extra_v = [], [], []
         for b in axis_blocks:
             r = self.axis_rows[b.name]
@@ -200,7 +200,7 @@ class _StructuredNLP:
         lam_f = ca.MX.sym("lam_f")
         lam_g = ca.MX.sym("lam_g", ng)
         Lk = ca.reshape(lam_g[: nx * K], nx, K)
-        Hall = ca.vec(f_h.map(K)(Xa, Xb, Ua, Ub, Hh, z, Lk))  # (nb*nb*K,)
+        Hall = ca.vec(f_h.map(K)(Xa, Xb, Ua, Ub, Hh, z, Lock, Lk))  # (nb*nb*K,)
         # entry (a, b) of block k, column-major (a fastest): row wcols[k, a], column wcols[k, b]
         hr = np.broadcast_to(wcols[:, None, :], (K, nb, nb)).ravel()
         hc = np.broadcast_to(wcols[:, :, None], (K, nb, nb)).ravel()

@@ -86,3 +86,21 @@ def test_a_span_too_short_for_the_search_grid_is_named_with_its_length(tmp_path,
     assert re.search(r"error: the fit span is 0\.2\d s, [0-9] samples on the 3\d-Hz search grid: too few to identify "
                      r"anything \(at least 10\); the last 25% of the span is kept for held-out predictions", err), err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_held_mask_of_the_wrong_shape_is_named_and_carried_by_selections():
+    """``Recording.held`` (a fit span's annotation: joints resting on a stop) must match q; row
+    and joint selections keep it, and the lock of an interval needs both its ends held."""
+    import numpy as np
+
+    from kinemaforge_opt.errors import DataError
+
+    t, q = np.arange(4.0), np.zeros((4, 2))
+    with pytest.raises(DataError, match=r"recording held must have shape \(4, 2\), got \(4, 1\)"):
+        Recording(t, ("a", "b"), q, held=np.ones((4, 1), dtype=bool))
+    held = np.array([[True, False], [True, False], [False, False], [True, True]])
+    rec = Recording(t, ("a", "b"), q, held=held)
+    assert rec.locks().tolist() == [[True, False], [False, False], [False, False]]
+    assert rec.select(("b", "a")).held.tolist() == held[:, ::-1].tolist()
+    assert rec.rows(np.array([True, True, False, False])).held.tolist() == [[True, False], [True, False]]
+    assert Recording(t, ("a", "b"), q, held=np.zeros((4, 2), dtype=bool)).held is None  # nothing held

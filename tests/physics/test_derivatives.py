@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from kinemaforge_opt.io.recording import Recording
+from kinemaforge_opt.nlp.joint_space import GAP_INTERVALS, stretches
 from kinemaforge_opt.physics.locate import (
     DERIVATIVE_WINDOW_S, block_means, motion_window, smooth_derivatives, velocity_noise,
 )
@@ -56,6 +57,19 @@ def test_block_means_do_not_straddle_a_gap():
     a = t[:, None] * 10.0
     np.testing.assert_allclose(block_means(t, 2, t), [0.5, 2.5, 20.5, 22.5])
     np.testing.assert_allclose(block_means(a, 2, t)[:, 0], [5.0, 25.0, 205.0, 225.0])
+
+
+def test_a_gap_stays_a_gap_at_the_blocks_rate():
+    """A hole of 7 sample intervals (a gap: more than GAP_INTERVALS) is 3.5 intervals of blocks
+    of 2, no gap on their grid, whose fit would carry the dynamics across it: the first blocks
+    after it are dropped until it is one again, so every stretch of the blocks is one of the
+    samples."""
+    t = np.concatenate([np.arange(30.0), 36.0 + np.arange(30.0)])
+    blocks = block_means(t, 2, t)
+    assert len(stretches(blocks)) == len(stretches(t)) == 2
+    hole = np.diff(blocks).max()
+    assert hole > GAP_INTERVALS * np.median(np.diff(blocks))
+    assert blocks[np.argmax(np.diff(blocks)) + 1] == pytest.approx(36.0 + 2 * 2 + 0.5)  # two blocks dropped
 
 
 @pytest.mark.parametrize("rate_hz, block", [(60.0, 1), (100.0, 3), (250.0, 1)])
