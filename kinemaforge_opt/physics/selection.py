@@ -843,12 +843,8 @@ class EffectSearch:
         return None
 
     def drop_earlier(self) -> None:
-        """Drop an earlier effect that no longer earns its place beside the others: it stays only
-        if it would still enter as the last one did, its removal costing at least the entry
-        threshold's BIC and moving the fit by the entry's effect size (MIN_EFFECT_SIZE_SIGMA noise
-        sigmas, times the fit's own RMS error when that is larger).  With BIC alone, a constant
-        bias that entered first as a stand-in for a drawer's damping stayed beside it at
-        0.016 N, though it would no longer have entered."""
+        """Drop an earlier effect that no longer earns its place beside the others (its removal
+        must cost at least as much BIC as the entry threshold)."""
         n_res = self.n_res
         for i in range(len(self.selected) - 2, -1, -1):
             keep = [x[:2] for k, x in enumerate(self.selected) if k != i]
@@ -858,11 +854,8 @@ class EffectSearch:
                 continue
             k_old = n_free_params(effect_parameters(self.model, *self.selected[i][:2]))
             cost = delta_bic(self.rss(self.current), self.rss(trial), k_old, n_res)  # BIC(with) - BIC(without)
-            size = float(np.sqrt(np.mean(((trial.q_fit - self.current.q_fit) / self.sigma_q) ** 2)))
-            floor = max(1.0, float(np.sqrt(np.mean(((self.current.q_fit - self.srch.q) / self.sigma_q) ** 2))))
-            if cost >= DELTA_BIC or size < MIN_EFFECT_SIZE_SIGMA * floor:
-                self.tested.append({"removed": f"{self.selected[i][1]} on {self.selected[i][0]}", "delta_bic": float(cost),
-                                    "effect_size_sigma": size})
+            if cost >= DELTA_BIC:
+                self.tested.append({"removed": f"{self.selected[i][1]} on {self.selected[i][0]}", "delta_bic": float(cost)})
                 self.say(f"removed {self.selected[i][1]} on {self.selected[i][0]} (ΔBIC of keeping it {cost:.0f})")
                 self.equivalents.pop(self.selected[i][:2], None)
                 del self.selected[i]
