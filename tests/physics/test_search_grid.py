@@ -202,3 +202,26 @@ def test_a_drawer_damped_beside_a_door_resting_open_on_its_stop_is_found_with_th
     assert found == pytest.approx({(door, "coulomb_friction"): 0.3, (drawer, "viscous_damping"): 5.0}, rel=0.03), \
         d.summary()
     assert f"{door} rests on a stop" in d.summary()
+
+
+def test_a_joint_that_barely_moves_cannot_rank_first_in_the_pre_screen():
+    """The pre-screen's score is residual variance per degree of freedom left: a joint with one
+    sample above its moving floor used to score 0 ("explains all") for every hypothesis, fitting
+    that sample exactly, and took the round's five NLP fits from the other joint's damping (a
+    drawer chest's second drawer, at rest while the first moved).  Scores here are for a door
+    whose missing force is damping, and a door moving at one sample only."""
+    from kinemaforge_opt.physics.prescreen import screen_scores
+
+    model = make_object("cabinet", 1).model
+    left, right = model.joint_names
+    rng = np.random.default_rng(0)
+    t = np.linspace(0.0, 4.0, 200)
+    v = np.stack([0.8 * np.sin(2.0 * t), np.where(np.arange(t.size) == 100, 0.5, 0.001)], axis=1)
+    q = np.cumsum(v, axis=0) * (t[1] - t[0])
+    r = np.stack([-0.5 * v[:, 0], np.zeros_like(t)], axis=1) + rng.normal(0.0, 0.05, v.shape)
+    pending = [(j, e) for j in (left, right) for e in ("viscous_damping", "coulomb_friction", "spring", "quadratic_drag")]
+    scores = screen_scores(model, pending, [], r, np.zeros_like(r), q, v, np.full(2, 0.01),
+                           np.sqrt(np.mean(v**2, axis=0)), np.full(2, 0.01), {j: (1.0, 1.0) for j in (left, right)})
+    assert min(scores, key=scores.get) == (left, "viscous_damping")
+    assert scores[(left, "viscous_damping")] < 0.2
+    assert all(scores[(right, e)] == 1.0 for e in ("viscous_damping", "coulomb_friction", "spring", "quadratic_drag"))
