@@ -874,8 +874,12 @@ class EffectSearch:
         ``dropped`` the dropped effects are listed under; ``first``: the current selection's
         prediction of ``span`` if already made; ``signal_sigma``: judge the gain only where a model
         errs by that many noise sigmas (:meth:`~.predict.HeldOut.joint_gains_sigma`); ``phases``: of
-        the pieces (:func:`~.predict.predict_before_after`)."""
-        keys = self.chosen()
+        the pieces (:func:`~.predict.predict_before_after`).  Only effects on joints that move in
+        ``span`` are dropped: one resting on its stop throughout (``span.held``) is predicted
+        alike by every model, so the span cannot judge its effects (a door's friction, found
+        while it swung, was dropped on a held-out span in which it rested shut)."""
+        resting = set() if span.held is None else {j for k, j in enumerate(span.joint_names) if span.held[:, k].all()}
+        keys = [key for key in self.chosen() if key[0] not in resting]
         self.say(doing.format(n=len(self.selected)))
         h = first or predict_before_after(self.nominal_model, self.model_of(self.current), span, span_s, phases)
         if keys and not h.scored:  # no piece long enough to simulate: nothing verifies the selection
