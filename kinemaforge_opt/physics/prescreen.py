@@ -5,8 +5,6 @@ the selection (:mod:`.selection`).  A ranking and a start, never evidence: the N
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..io.recording import Recording
@@ -216,10 +214,7 @@ def screen_scores(model: ArticulatedModel, pending: list[tuple[str, str]], selec
     ``v_noise`` (n,)) that the already selected effects on that joint leave and the hypothesis
     removes too, by joint linear least squares on their force columns (:func:`_columns`; a Stribeck
     column at the speed of :func:`stribeck_speeds` that explains most); lower = explains
-    more.  The share is of residual variance per degree of freedom left (squares over samples
-    less columns), so a joint that barely moves cannot look best by fitting its handful of
-    moving samples exactly: with no degree of freedom left the score is 1 (explains nothing).
-    A cheap ranking, not evidence: the chosen hypotheses are then fitted by the NLP."""
+    more.  A cheap ranking, not evidence: the chosen hypotheses are then fitted by the NLP."""
     out = {}
     for joint, effect in pending:
         k = model.joint_index(joint)
@@ -232,17 +227,12 @@ def screen_scores(model: ArticulatedModel, pending: list[tuple[str, str]], selec
                                   _best_stribeck_speed(vk, rk, ek, [], grid) if e == "stribeck_friction" else None)]
 
         def left(cols):
-            """Residual variance per degree of freedom left after the columns (inf: none left)."""
-            dof = rk.size - len(cols)
-            if dof <= 0:
-                return math.inf
             if not cols:
-                return float(np.sum(rk**2)) / dof
+                return float(np.sum(rk**2))
             A = np.stack(cols, axis=1)
-            return float(np.sum((rk - A @ np.linalg.lstsq(A, rk, rcond=None)[0]) ** 2)) / dof
+            return float(np.sum((rk - A @ np.linalg.lstsq(A, rk, rcond=None)[0]) ** 2))
 
         vs = _best_stribeck_speed(vk, rk, ek, base, grid) if effect == "stribeck_friction" else None
         new = [c[moving] for c in _columns(model, joint, effect, q, v, id_force, eps, v_scale, stops, vs)]
-        before, after = left(base), left(base + new)
-        out[(joint, effect)] = 1.0 if not math.isfinite(after) else after / max(before, 1e-300)
+        out[(joint, effect)] = left(base + new) / max(left(base), 1e-300)
     return out
