@@ -211,11 +211,12 @@ def held_on_stops(model: ArticulatedModel, rec: Recording, contact: np.ndarray) 
     """(T, n) True where a joint rests on a stop: runs of MIN_CLEAR_SAMPLES or more samples in
     which it is still (its Savitzky–Golay speed within HELD_SIGMA of that speed's noise, from its
     measured position noise) and within REST_SIGMA position noise sigmas of the contact band,
-    their median inside the band, each inside a still stretch that was in ``contact`` (T, n) with
-    that stop (:func:`stop_contact`) at some sample.  Not only the contact samples: a part resting on its
-    stop sits on the band's edge (a MuJoCo drawer shut 1 cm off its limit, with 2 mm of noise,
-    was in the band at 61 % of its samples).  The samples of an arrival (the impact, a bounce)
-    and of a push off the stop read faster: the smoothing window spreads them over its width."""
+    their median inside the band, each inside a still stretch that was in ``contact`` (T, n)
+    with that stop (:func:`stop_contact`) at some sample.  Not only the contact samples: a part
+    resting on its stop sits on the band's edge (a MuJoCo drawer shut 1 cm off its limit, with
+    2 mm of noise, was in the band at 61 % of its samples).  The samples of an arrival (the
+    impact, a bounce) and of a push off the stop read faster: the smoothing window spreads them
+    over its width."""
     from ..physics.locate import smooth_derivatives, velocity_noise  # physics.locate builds on this module
 
     sigma = measurement_sigma(rec.q)
