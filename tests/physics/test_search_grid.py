@@ -208,3 +208,34 @@ def test_a_door_resting_shut_on_its_stop_while_the_drawer_moves_keeps_its_fricti
     assert f"{door} rests on a stop in 4.38–10.2 s while another joint moves" in d.summary()
     assert "and 4.38–10.2 s of the 12-s recording" in d.summary()  # the drawer's pull is fitted
 
+
+
+def test_a_span_in_which_a_joint_rests_throughout_does_not_judge_that_joints_effects(monkeypatch):
+    """``EffectSearch.drop_until_better`` drops effects until the selection predicts a span better
+    than the nominal model.  On a span in which a door rests on its stop throughout
+    (``Recording.held``), every model predicts the door alike, so the door's friction must stay
+    (it was dropped on such a held-out span at 100 Hz, under load); on a span in which it moves,
+    a friction that predicts no better goes.  The predictions are stubbed: the rule is tested."""
+    from types import SimpleNamespace
+
+    import kinemaforge_opt.physics.selection as selection
+    from kinemaforge_opt.physics.predict import HeldOut
+
+    t = np.linspace(0.0, 1.0, 20)
+    same = HeldOut(t, np.zeros((20, 1)), np.zeros((20, 1)), np.zeros((20, 1)))  # no gain
+    monkeypatch.setattr(selection, "predict_before_after", lambda *a, **k: same)
+    search = object.__new__(selection.EffectSearch)
+    search.say = lambda *a: None
+    search.nominal_model, search.nominal_trial = None, SimpleNamespace(success=True)
+    search.model_of = lambda trial: None
+    search.sigma_q = np.array([1e-3])
+
+    def dropped_on(held):
+        search.selected = [("door", "coulomb_friction", -100.0)]
+        search.current, search.tested, search.dropped, search.equivalents = None, [], {}, {}
+        span = Recording(t, ("door",), np.zeros((20, 1)), held=held)
+        search.drop_until_better(span, None, "check", "rms", "checking {n}", "stage")
+        return search.dropped.get("stage", [])
+
+    assert dropped_on(np.ones((20, 1), dtype=bool)) == []
+    assert dropped_on(None) == ["coulomb_friction on door"]
