@@ -164,10 +164,10 @@ def _rest_acceleration(model: ArticulatedModel, rec: Recording, samples: int) ->
     return forward_dynamics(model, q, v, tau + model.passive_forces(q, v))
 
 
-def _stop_band(rec: Recording, k: int, lim) -> float:
-    """How close [rad or m] joint ``k`` of ``rec`` comes to a stop of its ``limits`` to touch it:
-    max(5 noise sigma, 1 % of the range)."""
-    return max(5 * float(measurement_sigma(rec.q[:, k:k + 1])[0]), 0.01 * (lim.upper - lim.lower))
+def _stop_band(sigma: float, lim) -> float:
+    """How close [rad or m] a joint with position noise ``sigma`` comes to a stop of its
+    ``limits`` to touch it: max(5 noise sigma, 1 % of the range)."""
+    return max(5 * sigma, 0.01 * (lim.upper - lim.lower))
 
 
 def stop_contact(model: ArticulatedModel, rec: Recording) -> np.ndarray:
@@ -181,7 +181,7 @@ def stop_contact(model: ArticulatedModel, rec: Recording) -> np.ndarray:
         lim = j.limits
         if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
             continue
-        tol = _stop_band(rec, k, lim)
+        tol = _stop_band(sigma[k], lim)
         # an arrival counts once the joint has been clear of both stops, beyond twice the band (a
         # slow start wanders in and out of the band's edge; summing |Δq| would count noise as motion)
         q = rec.q[:, k]
@@ -227,7 +227,7 @@ def held_on_stops(model: ArticulatedModel, rec: Recording, contact: np.ndarray) 
         if not contact[:, k].any():
             continue
         lim, q = j.limits, rec.q[:, k]
-        band = _stop_band(rec, k, lim)
+        band = _stop_band(sigma[k], lim)
         reach = band + REST_SIGMA * sigma[k]
         near = (q <= lim.lower + reach) | (q >= lim.upper - reach)
         for a, b in _free_runs(~still[:, k]):  # the still stretches

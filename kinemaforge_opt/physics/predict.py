@@ -226,7 +226,8 @@ def simulate_recording(model: ArticulatedModel, rec: Recording, extra: dict | No
     q0, v0, _ = smooth_derivatives(rec)
     tau = rec.tau if rec.tau is not None else np.zeros((rec.t.size, n))
     slope = np.diff(tau, axis=0) / np.diff(rec.t)[:, None]
-    U = np.hstack([tau[:-1] - slope * rec.t[:-1, None], slope] + ([rec.locks()] if holds else [])).T  # tau = a + b t per interval
+    # per interval: tau = a + b t, then the lock flags if a joint is held somewhere
+    U = np.hstack([tau[:-1] - slope * rec.t[:-1, None], slope] + ([rec.locks()] if holds else [])).T
     # max_step_size: one sample interval, so a force pulse after a free coast is never stepped
     # over; csparse: CVODES's default dense QR fails (too much work) on the 1e-156 entries the
     # stop's softplus puts in the Jacobian far from the stop

@@ -156,7 +156,7 @@ def linear_init(model: ArticulatedModel, joint: str, effect: str, start: Trial, 
         ps = [f"{joint}.{p}" for p in EFFECTS[e_type].params]
         if all(p in start.free for p in ps):
             r = r - EFFECTS[e_type].force(q[:, k], v[:, k], *[start.values[p][0] for p in ps], eps=float(eps[k]))
-    moving = np.abs(v[:, k]) > 0.05 * v_scale[k]
+    moving = np.abs(v[:, k]) > MOVING_SHARE * v_scale[k]
     if moving.sum() < 5:
         return {}
     qk, vk, rk = q[moving, k], v[moving, k], r[moving]
