@@ -10,7 +10,7 @@ import pytest
 from factories import random_tree
 from kinemaforge_opt.errors import MissingDynamicsError, UnknownNameError
 from kinemaforge_opt.model import ArticulatedModel, Joint, Link, urdf_string
-from kinemaforge_opt.model.pinocchio import build_pin_model
+from kinemaforge_opt.model.pinocchio import build_pin_model, joint_space_inertia
 from kinemaforge_opt.nlp.joint_space import locked_accelerations
 from kinemaforge_opt.symbolic import available_parameters, build_dynamics
 
@@ -68,6 +68,14 @@ def test_bridge_matches_pinocchio_urdf_parser(seed, tmp_path):
         qp[idx], vp[idx], tp[idx] = q, v, tau
         a_ref = pin.aba(pm, pd, qp, vp, tp)[idx]
         np.testing.assert_allclose(dyn.aba(q, v, tau, dyn.theta0).full().ravel(), a_ref, atol=1e-9)
+        # CRBA needs each subtree's joints numbered consecutively (the parser numbers depth
+        # first); the model's joint order must be so too, or M loses its couplings.
+        M_ref = _full_M(pin.crba(pm, pd, qp))[np.ix_(idx, idx)]
+        np.testing.assert_allclose(dyn.crba(q, dyn.theta0).full(), M_ref, atol=1e-9)
+        np.testing.assert_allclose(joint_space_inertia(model, q), M_ref, atol=1e-9)
+        assert float(dyn.kinetic_energy(q, v, dyn.theta0)) == pytest.approx(
+            pin.computeKineticEnergy(pm, pd, qp, vp), abs=1e-9
+        )
         assert float(dyn.potential_energy(q, dyn.theta0)) == pytest.approx(
             pin.computePotentialEnergy(pm, pd, qp), abs=1e-9
         )

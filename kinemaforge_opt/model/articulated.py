@@ -235,7 +235,8 @@ class Joint:
 
 @dataclass(frozen=True, eq=False)
 class ArticulatedModel:
-    """A fixed-base kinematic tree.  ``joints`` are stored in topological order (parents first).
+    """A fixed-base kinematic tree.  ``joints`` are stored depth first (parents first, each joint's
+    subtree right after it).
 
     gravity: (3,) world-frame gravity [m/s^2]; the root link's frame is the world frame.
     """
@@ -280,7 +281,7 @@ class ArticulatedModel:
 
     @property
     def link_names(self) -> tuple[str, ...]:
-        """Root first, then each joint's child in topological order."""
+        """Root first, then each joint's child in the joints' (depth-first) order."""
         return (self.root.name,) + tuple(j.child for j in self.joints)
 
     @property
@@ -335,7 +336,7 @@ class ArticulatedModel:
 
 
 def _topological_order(links: tuple[Link, ...], joints: tuple[Joint, ...]) -> tuple[Joint, ...]:
-    """Check the joints form one tree over ``links`` and return them parents-first."""
+    """Check the joints form one tree over ``links`` and return them depth first."""
     names = [l.name for l in links]
     if len(set(names)) != len(names):
         dup = sorted({n for n in names if names.count(n) > 1})
@@ -361,15 +362,18 @@ def _topological_order(links: tuple[Link, ...], joints: tuple[Joint, ...]) -> tu
         if not roots:
             raise ModelError("the joints form a loop: every link has a parent, so there is no root link")
         raise ModelError(f"the model has {len(roots)} root links ({', '.join(roots)}); expected one tree")
-    ordered, frontier = [], [roots[0]]
     by_parent: dict[str, list[Joint]] = {}
     for j in joints:
         by_parent.setdefault(j.parent, []).append(j)
-    while frontier:
-        ln = frontier.pop(0)
-        for j in by_parent.get(ln, []):
-            ordered.append(j)
-            frontier.append(j.child)
+    # Depth first (each joint's subtree right after it, siblings in the given order), as
+    # Pinocchio's URDF parser numbers them: its CRBA assumes every subtree's velocity indices
+    # are consecutive (ABA and RNEA only need parents first), and a breadth-first order breaks
+    # that on a tree with two branches.
+    ordered, stack = [], list(reversed(by_parent.get(roots[0], [])))
+    while stack:
+        j = stack.pop()
+        ordered.append(j)
+        stack.extend(reversed(by_parent.get(j.child, [])))
     if len(ordered) != len(joints):
         stuck = sorted(set(jnames) - {j.name for j in ordered})
         raise ModelError(f"joints {', '.join(stuck)} form a loop not connected to root {roots[0]!r}")

@@ -1,7 +1,7 @@
 """Numeric Pinocchio model from an :class:`ArticulatedModel`.
 
 Layout (shared with the symbolic bridge): one Pinocchio joint per movable joint, in the model's
-topological order; continuous joints are 1-DoF revolute (q is the angle, not cos/sin); links
+(depth-first) order; continuous joints are 1-DoF revolute (q is the angle, not cos/sin); links
 attached by fixed joints are merged into the body of the joint they ride on; every link gets a
 BODY frame named after it, so ``data.oMf[model.getFrameId(name)]`` is ``T_world_link``.
 Joint damping, friction and springs are not part of a ``pin.Model`` (apply them as forces);

@@ -564,16 +564,9 @@ def locked_accelerations(dyn: Dynamics, q, v, tau, theta, lock):
     M a_free = tau - h.  Exact for any tree (a held parent carries its children as a fixed
     base; a held child rides its moving parent), and a_free itself when nothing is held.
     Pinocchio's reduced model (``buildReducedModel``) is the same system with the joint welded;
-    the bridge's CasADi functions take one model, so the weld is written here as a constraint.
-    M is assembled from RNEA columns, M e_j = RNEA(q, 0, e_j) - RNEA(q, 0, 0): Pinocchio's CRBA
-    assumes each subtree's joints are numbered consecutively (depth first), which a model's
-    joint order need not be (a random tree's M lost its couplings), while RNEA and ABA only need
-    parents before children."""
+    the bridge's CasADi functions take one model, so the weld is written here as a constraint."""
     a_free = dyn.aba(q, v, tau, theta)
-    n = a_free.shape[0]
-    zero = ca.DM.zeros(n)
-    gravity = dyn.rnea(q, zero, zero, theta)
-    M = ca.horzcat(*[dyn.rnea(q, zero, ca.DM(np.eye(n)[:, j]), theta) - gravity for j in range(n)])
+    M = dyn.crba(q, theta)
     free = 1 - lock
     return ca.solve(ca.diag(free) @ M + ca.diag(lock), free * (M @ a_free))
 

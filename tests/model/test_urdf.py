@@ -6,9 +6,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from factories import random_tree
+from factories import random_inertial, random_tree
 from kinemaforge_opt.errors import InputFileError, ModelError
-from kinemaforge_opt.model import JointDynamics, parse_urdf, read_urdf, urdf_string, write_urdf
+from kinemaforge_opt.model import ArticulatedModel, Joint, JointDynamics, Link, parse_urdf, read_urdf, urdf_string, write_urdf
 
 
 def _assert_same(a, b):
@@ -41,6 +41,24 @@ def test_round_trip_is_exact(seed, tmp_path):
     _assert_same(model, once)
     twice = parse_urdf(urdf_string(once))
     _assert_same(once, twice)
+
+
+def test_joint_order_is_pinocchios_depth_first(tmp_path):
+    """Joints listed breadth first (door, drawer, then a handle on the door) are stored depth
+    first, the order Pinocchio's URDF parser gives the same file: each subtree right after its
+    joint, which Pinocchio's CRBA needs."""
+    rng = np.random.default_rng(5)
+    T = np.eye(4)
+    joints = [Joint("door", "revolute", "base", "door_link", T, (0, 0, 1)),
+              Joint("drawer", "prismatic", "base", "drawer_link", T, (1, 0, 0)),
+              Joint("handle", "revolute", "door_link", "handle_link", T, (0, 1, 0))]
+    links = [Link("base")] + [Link(n, random_inertial(rng)) for n in ("door_link", "drawer_link", "handle_link")]
+    model = ArticulatedModel("breadth_first", tuple(links), tuple(joints))
+    assert model.joint_names == ("door", "handle", "drawer")
+    path = tmp_path / "m.urdf"
+    write_urdf(model, path)
+    pm = pin.buildModelFromUrdf(str(path))
+    assert tuple(pm.names[1:]) == model.joint_names
 
 
 def test_written_urdf_loads_in_pinocchio_and_drake(tmp_path):
