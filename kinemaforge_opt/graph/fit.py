@@ -124,11 +124,14 @@ def _robust_chi2(r: np.ndarray) -> float:
     return float(np.sum(2.0 * (np.sqrt(1.0 + r**2) - 1.0)))
 
 
-def _solve(fun, x0: np.ndarray, n_global: int, n_latent: int, rows_per_sample: int):
+def _solve(fun, x0: np.ndarray, n_global: int, n_latent: int, rows_per_sample: int, batched: bool = False):
     """Robust least squares where the global parameters touch every residual and latent value i
     only its own ``rows_per_sample`` residuals.  The Jacobian is taken by forward differences in
     n_global + 1 evaluations (all latent values are perturbed at once: their rows are disjoint)
-    and handed over dense for small problems, as CSR (LSMR trust region) for large ones."""
+    and handed over dense for small problems, as CSR (LSMR trust region) for large ones.
+    batched: ``fun`` also takes a (k, n) stack of parameter vectors and returns (k, m) residuals;
+    the Jacobian's n_global + 2 evaluations are then one call (numpy's per-call overhead, not
+    arithmetic, is what a 30-sample fit spends its time on)."""
     if not n_latent:
         res = least_squares(fun, x0, loss="soft_l1", f_scale=1.0, method="trf", x_scale="jac", max_nfev=MAX_NFEV)
         return res.x, res.fun
@@ -141,17 +144,15 @@ def _solve(fun, x0: np.ndarray, n_global: int, n_latent: int, rows_per_sample: i
         indptr = np.arange(m + 1) * (n_global + 1)
     eps = np.sqrt(np.finfo(float).eps)
 
-    def jac(x, f0=None):
-        f0 = fun(x) if f0 is None else f0
+    def jac(x):
         h = eps * np.maximum(1.0, np.abs(x))
-        Jg = np.empty((m, n_global))
-        for i in range(n_global):
-            xp = x.copy()
-            xp[i] += h[i]
-            Jg[:, i] = (fun(xp) - f0) / h[i]
-        xp = x.copy()
-        xp[n_global:] += h[n_global:]
-        Jl = (fun(xp) - f0) / h[n_global:][sample]
+        # rows: x, x + h_i e_i per global parameter, x + every latent step at once
+        X = np.tile(x, (n_global + 2, 1))
+        X[1 + np.arange(n_global), np.arange(n_global)] += h[:n_global]
+        X[-1, n_global:] += h[n_global:]
+        F = fun(X) if batched else np.stack([fun(xi) for xi in X])
+        Jg = (F[1:-1] - F[0]).T / h[:n_global]
+        Jl = (F[-1] - F[0]) / h[n_global:][sample]
         if dense:
             J = np.zeros((m, n))
             J[:, :n_global] = Jg
@@ -202,14 +203,26 @@ def _chordal_mean(Rs: np.ndarray) -> np.ndarray:
     return U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
 
 
+def _pose_residuals(m: RelativeMotion, R: np.ndarray, p: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Noise-normalised residuals of the model poses R (k, n, 3, 3), p (k, n, 3) of k parameter
+    vectors against ``m``'s poses: (k, 6n), per sample (position, rotation vector); (6n,) when
+    ``x``, the parameters asked for, is one vector."""
+    k, n = p.shape[:2]
+    R = np.broadcast_to(R, (k, n, 3, 3)).reshape(-1, 3, 3)
+    rot = _rot_residual(R, np.tile(m.Rs, (k, 1, 1))).reshape(k, n, 3)
+    r = np.concatenate([(m.positions - p) / m.sigma_position, rot / m.sigma_rotation], axis=2).reshape(k, -1)
+    return r if np.ndim(x) == 2 else r[0]
+
+
 def _fit_pose(kind: str, m: RelativeMotion) -> JointHypothesis:
     Rs, ps, sp, sr, n = m.Rs, m.positions, m.sigma_position, m.sigma_rotation, m.n
     if kind == "rigid":
         R0 = _chordal_mean(Rs)
 
-        def model(x):
-            R = _rot(np.tile(x[:3], (n, 1))) @ R0
-            return R, np.tile(x[3:6], (n, 1))
+        def fun(x):
+            X = np.atleast_2d(x)
+            R = (_rot(X[:, :3]) @ R0)[:, None]
+            return _pose_residuals(m, R, np.repeat(X[:, None, 3:6], n, axis=1), x)
 
         x0, n_glob, k = np.r_[np.zeros(3), np.median(ps, axis=0)], 6, 6
     elif kind == "prismatic":
@@ -219,20 +232,18 @@ def _fit_pose(kind: str, m: RelativeMotion) -> JointHypothesis:
         B = tangent_basis(a0)
         d0 = (ps - c) @ a0
 
-        def model(x):
-            R = _rot(np.tile(x[:3], (n, 1))) @ R0
-            a = normalize(a0 + B @ x[3:5])
-            return R, c + B @ x[5:7] + x[7:, None] * a
+        def fun(x):
+            X = np.atleast_2d(x)
+            R = (_rot(X[:, :3]) @ R0)[:, None]
+            a = a0 + X[:, 3:5] @ B.T
+            a /= np.linalg.norm(a, axis=1, keepdims=True)
+            return _pose_residuals(m, R, (c + X[:, 5:7] @ B.T)[:, None] + X[:, 7:, None] * a[:, None], x)
 
         x0, n_glob, k = np.r_[np.zeros(7), d0], 7, 7
     else:
         return _fit_pose_screw(kind, m)
 
-    def fun(x):
-        R, p = model(x)
-        return np.concatenate([(ps - p) / sp, _rot_residual(R, Rs) / sr], axis=1).ravel()
-
-    x, r = _solve(fun, x0, n_glob, x0.size - n_glob, 6)
+    x, r = _solve(fun, x0, n_glob, x0.size - n_glob, 6, batched=True)
     r = r.reshape(n, 6)
     pos_res = r[:, :3] * sp
     rot = dict(rotation_rms=float(np.sqrt(np.mean(np.sum((r[:, 3:] * sr) ** 2, axis=1)))), rotation_sigma=float(sr))
@@ -282,24 +293,25 @@ def _fit_pose_screw(kind: str, m: RelativeMotion) -> JointHypothesis:
         a0, c0, phi, h0 = start(m, ref, bool(nh))
         B = tangent_basis(a0)
 
-        def model(x, a0=a0, c0=c0, B=B):
-            a = normalize(a0 + B @ x[:2])
-            cc = c0 + B @ x[2:4]
-            Rr = _rot(x[4:7][None])[0] @ R_ref
-            pr = p_ref + x[7:10]
-            h = x[10] if nh else 0.0
-            th = x[10 + nh :]
-            Ra = _rot(th[:, None] * a)
-            return Ra @ Rr, cc + np.einsum("nij,j->ni", Ra, pr - cc) + h * th[:, None] * a
-
-        def fun(x, model=model):
-            R, p = model(x)
-            return np.concatenate([(ps - p) / sp, _rot_residual(R, Rs) / sr], axis=1).ravel()
+        def fun(x, a0=a0, c0=c0, B=B):
+            """Residuals (m,) of x (nx,), or (k, m) of a stack x (k, nx)."""
+            X = np.atleast_2d(x)
+            k = X.shape[0]
+            a = a0 + X[:, :2] @ B.T
+            a /= np.linalg.norm(a, axis=1, keepdims=True)
+            cc = c0 + X[:, 2:4] @ B.T
+            Rr = _rot(X[:, 4:7]) @ R_ref
+            pr = p_ref + X[:, 7:10]
+            h = X[:, 10] if nh else np.zeros(k)
+            th = X[:, 10 + nh:]
+            Ra = _rot((th[:, :, None] * a[:, None, :]).reshape(-1, 3)).reshape(k, n, 3, 3)
+            p = cc[:, None] + np.einsum("knij,kj->kni", Ra, pr - cc) + (h[:, None] * th)[:, :, None] * a[:, None, :]
+            return _pose_residuals(m, Ra @ Rr[:, None], p, x)
 
         x0 = np.r_[np.zeros(10), [h0] * nh, phi]
         starts.append((_robust_chi2(fun(x0)), fun, x0, a0, c0, B))
     _, fun, x0, a0, c0, B = min(starts, key=lambda s: s[0])
-    x, r = _solve(fun, x0, n_glob, n, 6)
+    x, r = _solve(fun, x0, n_glob, n, 6, batched=True)
     r = r.reshape(n, 6)
     a, cc = normalize(a0 + B @ x[:2]), c0 + B @ x[2:4]
     pos_res = r[:, :3] * sp
@@ -333,15 +345,18 @@ def _fit_points(kind: str, m: RelativeMotion) -> JointHypothesis:
     ps, sp, n = m.positions, m.sigma_position, m.n
     mean = ps.mean(axis=0)
     _, _, Vt = np.linalg.svd(ps - mean)
+    # each model maps a stack of parameter vectors X (k, nx) to positions (k, n, 3)
     if kind == "rigid":
-        model = lambda x: np.tile(x, (n, 1))  # noqa: E731
+        model = lambda X: np.repeat(X[:, None], n, axis=1)  # noqa: E731
         x0, n_glob, k = np.median(ps, axis=0), 3, 3
     elif kind == "prismatic":
         a0 = Vt[0]
         B = tangent_basis(a0)
 
-        def model(x):
-            return mean + B @ x[2:4] + x[4:, None] * normalize(a0 + B @ x[:2])
+        def model(X):
+            a = a0 + X[:, :2] @ B.T
+            a /= np.linalg.norm(a, axis=1, keepdims=True)
+            return (mean + X[:, 2:4] @ B.T)[:, None] + X[:, 4:, None] * a[:, None]
 
         x0, n_glob, k = np.r_[np.zeros(4), (ps - mean) @ a0], 4, 4
     else:  # revolute / helical: plane (normal = axis) + algebraic circle fit in that plane
@@ -349,25 +364,29 @@ def _fit_points(kind: str, m: RelativeMotion) -> JointHypothesis:
         nh = 1 if kind == "helical" else 0
         B = tangent_basis(a0)
 
-        def frame(x):
-            a = normalize(a0 + B @ x[3:5])
-            u = normalize(U0[:, 0] - a * (U0[:, 0] @ a))
+        def frame(X):
+            a = a0 + X[:, 3:5] @ B.T
+            a /= np.linalg.norm(a, axis=1, keepdims=True)
+            u = U0[:, 0] - a * (a @ U0[:, 0])[:, None]
+            u /= np.linalg.norm(u, axis=1, keepdims=True)
             return a, u, np.cross(a, u)
 
-        def model(x):
-            a, u, v = frame(x)
-            th = x[6 + nh :]
-            h = x[6] if nh else 0.0
-            return x[:3] + x[5] * (np.cos(th)[:, None] * u + np.sin(th)[:, None] * v) + h * th[:, None] * a
+        def model(X):
+            a, u, v = frame(X)
+            th = X[:, 6 + nh:, None]
+            h = X[:, 6, None, None] if nh else 0.0
+            return (X[:, None, :3] + X[:, 5, None, None] * (np.cos(th) * u[:, None] + np.sin(th) * v[:, None])
+                    + h * th * a[:, None])
 
         x0 = np.r_[centre0, 0.0, 0.0, r0, [0.0] * nh, th0]  # helix starts as the circle
         n_glob = 6 + nh
         k = 6 + nh
 
     def fun(x):
-        return ((ps - model(x)) / sp).ravel()
+        r = ((ps - model(np.atleast_2d(x))) / sp).reshape(-1, 3 * n)
+        return r if np.ndim(x) == 2 else r[0]
 
-    x, _ = _solve(fun, x0, n_glob, x0.size - n_glob, 3)
+    x, _ = _solve(fun, x0, n_glob, x0.size - n_glob, 3, batched=True)
     r = fun(x)
     pos_res = r * sp
     if kind == "rigid":
@@ -377,7 +396,7 @@ def _fit_points(kind: str, m: RelativeMotion) -> JointHypothesis:
         axis, q = _orient(a, x[4:])
         origin = mean + B @ x[2:4] + x[4] * a
         return _finish(kind, m, axis, origin, 0.0, None, q, r, pos_res, k)
-    a, _, _ = frame(x)
+    a = frame(x[None])[0][0]
     th = x[n_glob:]
     # The circle's angle runs about +a; flipping the axis negates the angle and keeps the pitch.
     axis, q = _orient(a, th)

@@ -86,7 +86,8 @@ def test_friction_of_a_joint_that_stays_still_is_not_identified_nor_written():
     Q = np.column_stack([q[idx], rng.normal(0.0, 0.003, idx.size)])
     data = two_door_data(true, two_doors(axis, ORIGIN, origin_b, damping_a=0.0), t[idx], Q,
                          Q + rng.normal(0, 0.02, Q.shape), w, point_sigma=0.001)
-    r = refine_screws(data, ScrewOptions(energy="soft", substep_s=FINE))
+    # the plumb refit (gravity_aligned) re-solves everything and tests nothing here
+    r = refine_screws(data, ScrewOptions(energy="soft", substep_s=FINE, gravity_aligned=False))
     still = r.model.joint("hinge_b").dynamics
     assert still.damping == 0.0 and still.coulomb == 0.0
     for name in ("damping:hinge_b", "coulomb:hinge_b", "mass_ratio:door_b", "inertia_ratio:door_b"):
