@@ -124,14 +124,14 @@ def _robust_chi2(r: np.ndarray) -> float:
     return float(np.sum(2.0 * (np.sqrt(1.0 + r**2) - 1.0)))
 
 
-def _solve(fun, x0: np.ndarray, n_global: int, n_latent: int, rows_per_sample: int, batched: bool = False):
+def _solve(fun, x0: np.ndarray, n_global: int, n_latent: int, rows_per_sample: int):
     """Robust least squares where the global parameters touch every residual and latent value i
     only its own ``rows_per_sample`` residuals.  The Jacobian is taken by forward differences in
     n_global + 1 evaluations (all latent values are perturbed at once: their rows are disjoint)
     and handed over dense for small problems, as CSR (LSMR trust region) for large ones.
-    batched: ``fun`` also takes a (k, n) stack of parameter vectors and returns (k, m) residuals;
-    the Jacobian's n_global + 2 evaluations are then one call (numpy's per-call overhead, not
-    arithmetic, is what a 30-sample fit spends its time on)."""
+    ``fun`` maps parameters (n,) to residuals (m,) and a stack (k, n) to (k, m): the Jacobian's
+    n_global + 2 evaluations are one call (numpy's per-call overhead, not arithmetic, is what a
+    30-sample fit spends its time on)."""
     if not n_latent:
         res = least_squares(fun, x0, loss="soft_l1", f_scale=1.0, method="trf", x_scale="jac", max_nfev=MAX_NFEV)
         return res.x, res.fun
@@ -150,7 +150,7 @@ def _solve(fun, x0: np.ndarray, n_global: int, n_latent: int, rows_per_sample: i
         X = np.tile(x, (n_global + 2, 1))
         X[1 + np.arange(n_global), np.arange(n_global)] += h[:n_global]
         X[-1, n_global:] += h[n_global:]
-        F = fun(X) if batched else np.stack([fun(xi) for xi in X])
+        F = fun(X)
         Jg = (F[1:-1] - F[0]).T / h[:n_global]
         Jl = (F[-1] - F[0]) / h[n_global:][sample]
         if dense:
@@ -243,7 +243,7 @@ def _fit_pose(kind: str, m: RelativeMotion) -> JointHypothesis:
     else:
         return _fit_pose_screw(kind, m)
 
-    x, r = _solve(fun, x0, n_glob, x0.size - n_glob, 6, batched=True)
+    x, r = _solve(fun, x0, n_glob, x0.size - n_glob, 6)
     r = r.reshape(n, 6)
     pos_res = r[:, :3] * sp
     rot = dict(rotation_rms=float(np.sqrt(np.mean(np.sum((r[:, 3:] * sr) ** 2, axis=1)))), rotation_sigma=float(sr))
@@ -311,7 +311,7 @@ def _fit_pose_screw(kind: str, m: RelativeMotion) -> JointHypothesis:
         x0 = np.r_[np.zeros(10), [h0] * nh, phi]
         starts.append((_robust_chi2(fun(x0)), fun, x0, a0, c0, B))
     _, fun, x0, a0, c0, B = min(starts, key=lambda s: s[0])
-    x, r = _solve(fun, x0, n_glob, n, 6, batched=True)
+    x, r = _solve(fun, x0, n_glob, n, 6)
     r = r.reshape(n, 6)
     a, cc = normalize(a0 + B @ x[:2]), c0 + B @ x[2:4]
     pos_res = r[:, :3] * sp
@@ -386,7 +386,7 @@ def _fit_points(kind: str, m: RelativeMotion) -> JointHypothesis:
         r = ((ps - model(np.atleast_2d(x))) / sp).reshape(-1, 3 * n)
         return r if np.ndim(x) == 2 else r[0]
 
-    x, _ = _solve(fun, x0, n_glob, x0.size - n_glob, 3, batched=True)
+    x, _ = _solve(fun, x0, n_glob, x0.size - n_glob, 3)
     r = fun(x)
     pos_res = r * sp
     if kind == "rigid":

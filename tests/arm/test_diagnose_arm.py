@@ -29,7 +29,10 @@ def _without(model, joint, **zeroed):
     return model.with_joint(joint, dynamics=dataclasses.replace(model.joint(joint).dynamics, **zeroed))
 
 
-@pytest.mark.parametrize("joint, field, effect", [("j2", "damping", "viscous_damping"), ("j3", "coulomb", "coulomb_friction")])
+@pytest.mark.parametrize("joint, field, effect", [
+    pytest.param("j2", "damping", "viscous_damping", marks=pytest.mark.slow),  # damping alone: also the doors'
+    ("j3", "coulomb", "coulomb_friction"),
+])
 def test_a_joint_effect_left_out_of_an_arm_model_is_the_only_one_found(joint, field, effect):
     truth = small_arm()
     nominal = _without(truth, joint, **{field: 0.0})
