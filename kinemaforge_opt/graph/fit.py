@@ -129,9 +129,9 @@ def _solve(fun, x0: np.ndarray, n_global: int, n_latent: int, rows_per_sample: i
     only its own ``rows_per_sample`` residuals.  The Jacobian is taken by forward differences in
     n_global + 1 evaluations (all latent values are perturbed at once: their rows are disjoint)
     and handed over dense for small problems, as CSR (LSMR trust region) for large ones.
-    ``fun`` maps parameters (n,) to residuals (m,) and a stack (k, n) to (k, m): the Jacobian's
-    n_global + 2 evaluations are one call (numpy's per-call overhead, not arithmetic, is what a
-    30-sample fit spends its time on)."""
+    ``fun`` maps parameters (n,) to residuals (m,) and a stack (k, n) to (k, m): those n_global + 1
+    evaluations and the unperturbed one are one call (numpy's per-call overhead, not arithmetic,
+    is what a 30-sample fit spends its time on)."""
     if not n_latent:
         res = least_squares(fun, x0, loss="soft_l1", f_scale=1.0, method="trf", x_scale="jac", max_nfev=MAX_NFEV)
         return res.x, res.fun
