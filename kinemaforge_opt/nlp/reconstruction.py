@@ -1027,12 +1027,8 @@ def _solver_options(options: ScrewOptions, dense: bool, hess_lag: ca.Function | 
     if dense:
         # the dense problem is non-convex (IPOPT corrects the Hessian's inertia at most
         # iterations); the monotone barrier update crawled there: protocol_cabinet_0 101
-        # iterations -> 26 adaptive, the hard-energy test door 200 (not converged) -> 79.  The
-        # adaptive barrier's fall-back to a monotone mode reset mu from 1e-6 to 4e-3 at
-        # protocol_cabinet_0's iteration 137 and the stage ran out of iterations (200); never
-        # falling back, it converges in 74 (protocol_refrigerator_0: 200 -> 148)
+        # iterations -> 26 adaptive, the hard-energy test door 200 (not converged) -> 79
         out["ipopt.mu_strategy"] = "adaptive"
-        out["ipopt.adaptive_mu_globalization"] = "never-monotone-mode"
     if hess_lag is not None:  # the structured Hessian: the MX graph's own derivatives are cheap
         out["hess_lag"] = hess_lag
     elif dense and options.expand and not options.jit:
