@@ -88,6 +88,11 @@ class JointHypothesis:
     position_residuals: np.ndarray | None = None
 
 
+def _unit_rows(A: np.ndarray) -> np.ndarray:
+    """The rows of ``A`` (k, 3) scaled to unit length (a stack of axes, one per parameter vector)."""
+    return A / np.linalg.norm(A, axis=1, keepdims=True)
+
+
 def _rot(axis_angles: np.ndarray) -> np.ndarray:
     """(N, 3) rotation vectors -> (N, 3, 3) matrices (Rodrigues, vectorised; the fits call this
     thousands of times, where scipy's Rotation spends most of its time validating)."""
@@ -235,8 +240,7 @@ def _fit_pose(kind: str, m: RelativeMotion) -> JointHypothesis:
         def fun(x):
             X = np.atleast_2d(x)
             R = (_rot(X[:, :3]) @ R0)[:, None]
-            a = a0 + X[:, 3:5] @ B.T
-            a /= np.linalg.norm(a, axis=1, keepdims=True)
+            a = _unit_rows(a0 + X[:, 3:5] @ B.T)
             return _pose_residuals(m, R, (c + X[:, 5:7] @ B.T)[:, None] + X[:, 7:, None] * a[:, None], x)
 
         x0, n_glob, k = np.r_[np.zeros(7), d0], 7, 7
@@ -297,8 +301,7 @@ def _fit_pose_screw(kind: str, m: RelativeMotion) -> JointHypothesis:
             """Residuals (m,) of x (nx,), or (k, m) of a stack x (k, nx)."""
             X = np.atleast_2d(x)
             k = X.shape[0]
-            a = a0 + X[:, :2] @ B.T
-            a /= np.linalg.norm(a, axis=1, keepdims=True)
+            a = _unit_rows(a0 + X[:, :2] @ B.T)
             cc = c0 + X[:, 2:4] @ B.T
             Rr = _rot(X[:, 4:7]) @ R_ref
             pr = p_ref + X[:, 7:10]
@@ -354,8 +357,7 @@ def _fit_points(kind: str, m: RelativeMotion) -> JointHypothesis:
         B = tangent_basis(a0)
 
         def model(X):
-            a = a0 + X[:, :2] @ B.T
-            a /= np.linalg.norm(a, axis=1, keepdims=True)
+            a = _unit_rows(a0 + X[:, :2] @ B.T)
             return (mean + X[:, 2:4] @ B.T)[:, None] + X[:, 4:, None] * a[:, None]
 
         x0, n_glob, k = np.r_[np.zeros(4), (ps - mean) @ a0], 4, 4
@@ -365,10 +367,8 @@ def _fit_points(kind: str, m: RelativeMotion) -> JointHypothesis:
         B = tangent_basis(a0)
 
         def frame(X):
-            a = a0 + X[:, 3:5] @ B.T
-            a /= np.linalg.norm(a, axis=1, keepdims=True)
-            u = U0[:, 0] - a * (a @ U0[:, 0])[:, None]
-            u /= np.linalg.norm(u, axis=1, keepdims=True)
+            a = _unit_rows(a0 + X[:, 3:5] @ B.T)
+            u = _unit_rows(U0[:, 0] - a * (a @ U0[:, 0])[:, None])
             return a, u, np.cross(a, u)
 
         def model(X):

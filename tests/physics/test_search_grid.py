@@ -209,7 +209,6 @@ def test_a_door_resting_shut_on_its_stop_while_the_drawer_moves_keeps_its_fricti
     assert "and 4.38–10.2 s of the 12-s recording" in d.summary()  # the drawer's pull is fitted
 
 
-
 def test_a_span_in_which_a_joint_rests_throughout_does_not_judge_that_joints_effects(monkeypatch):
     """``EffectSearch.drop_until_better`` drops effects until the selection predicts a span better
     than the nominal model.  On a span in which a door rests on its stop throughout
