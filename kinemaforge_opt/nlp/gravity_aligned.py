@@ -1,7 +1,12 @@
-"""Gravity-aligned joint axes: the hypothesis that a joint's axis is plumb or level.
+"""Gravity-aligned joint axes: the hypothesis that a joint's axis is plumb, level, or square to its
+parent.
 
 Furniture and appliances are built square to gravity: door and lid hinges are vertical or
-horizontal, drawer slides level.  The screw NLP fits every axis freely, and a fit whose visual
+horizontal, drawer slides level.  They are built square to themselves too: a drawer slides
+straight out of its carcass, a lid turns about an edge of its base.  A drawer's front face
+moving along its own normal leaves the slide's heading (its yaw about the vertical) to the few
+points on its edges, and the free fit of a chest's drawer wandered 3.9° from its carcass's
+depth.  The screw NLP fits every axis freely, and a fit whose visual
 term barely prefers a tilt of a few tenths of a degree leaves a model that is not in equilibrium
 where the recording rests: a frictionless door on an axis tilted 0.2° swings to the lowest point
 of its circle within the 50-s replay (protocol_refrigerator_1: 0.59 m of drift for the true
@@ -10,7 +15,10 @@ model's 0.05 m).
 For every joint whose fitted axis lies within :data:`NEAR_DEG` of parallel or perpendicular to
 gravity, the constrained fit (``aligned:<joint>`` linear constraints on its axis variable) is a
 nested model with fewer parameters: two for a plumb axis (its direction is fixed), one for a
-level one (its rise is fixed).  It is chosen by the Bayesian information criterion on the
+level one (its rise is fixed), two for a level axis also within NEAR_DEG of one of its parent
+part's horizontal face directions (:func:`face_directions`; "square": its direction is fixed to
+that face direction, measured on the parent's own points, not the joint's).  A square axis
+refused is tested level.  It is chosen by the Bayesian information criterion on the
 screw NLP's terms (each ≈ ½ χ²): kept when Δχ² = 2 n (J_aligned − J_free) is at most k ln n, n
 the number of visual residuals and k the parameters it saves.  The visual part of each J is
 scored on the fit's own correspondences (refreshed under its motion until they settle, points
@@ -28,6 +36,45 @@ from ..spatial import tangent_basis
 
 # Axes within this angle of plumb or level are tested (a larger tilt is a design, not an error).
 NEAR_DEG = 3.0
+# Normals within this angle of horizontal vote for a part's face directions (a box's side faces;
+# its top and bottom, and the noisy normals along its edges, do not).
+FACE_VOTE_DEG = 30.0
+# A part's horizontal normals name its face directions when their four-fold circular mean has at
+# least this resultant length (1: every vote on a box's four sides; a cylinder's about 0).
+MIN_SQUARENESS = 0.5
+FACE_INLIER_DEG = 5.0
+
+
+def face_directions(normals: np.ndarray, gravity: np.ndarray) -> np.ndarray | None:
+    """(2, 3) the two horizontal directions [world, unit] a part's side faces look along, from its
+    surface normals (K, 3) [unit, any sign], or None when its horizontal normals do not agree on
+    a square (:data:`MIN_SQUARENESS`) or there is no gravity.
+
+    Each normal within FACE_VOTE_DEG of horizontal votes with its heading φ about the vertical,
+    weighted by its horizontal length squared; four-fold (e^{4iφ}) so that a box's four sides and
+    either sign of a normal vote alike.  The mean heading φ₀ = arg(Σ w e^{4iφ}) / 4 and φ₀ + 90°
+    are the directions."""
+    g = np.asarray(gravity, float)
+    if not np.linalg.norm(g) > 0:
+        return None
+    up = -g / np.linalg.norm(g)
+    n = np.asarray(normals, float)
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    e1, e2 = tangent_basis(up).T
+    x, y = n @ e1, n @ e2
+    w = x**2 + y**2
+    vote = w >= np.cos(np.radians(FACE_VOTE_DEG)) ** 2
+    if not vote.any():
+        return None
+    w, e4 = w[vote], np.exp(4j * np.arctan2(y[vote], x[vote]))
+    z = np.sum(w * e4) / np.sum(w)
+    if abs(z) < MIN_SQUARENESS:
+        return None
+    # again over the votes within FACE_INLIER_DEG of that square (edges, handles and the insides
+    # of openings lean the first mean)
+    inlier = np.real(e4 * np.conj(z / abs(z))) >= np.cos(np.radians(4.0 * FACE_INLIER_DEG))
+    phi = np.angle(np.sum(w[inlier] * e4[inlier])) / 4.0
+    return np.stack([np.cos(phi) * e1 + np.sin(phi) * e2, -np.sin(phi) * e1 + np.cos(phi) * e2])
 
 
 def world_rotation(model: ArticulatedModel, joint_name: str) -> np.ndarray:
@@ -57,10 +104,30 @@ def alignment(model: ArticulatedModel, joint_name: str, axis: np.ndarray) -> str
     return None
 
 
-def constraint_rows(model: ArticulatedModel, joint_name: str, kind: str) -> np.ndarray:
+def square_direction(model: ArticulatedModel, joint_name: str, axis: np.ndarray,
+                     faces: np.ndarray | None) -> np.ndarray | None:
+    """The face direction (3,) [world, unit, signed as the axis] of ``faces`` (2, 3) (the joint's
+    parent part's, :func:`face_directions`) within NEAR_DEG of the level axis (3,) in the joint
+    frame, or None (no faces, the axis not level, or no face direction near it)."""
+    if faces is None or alignment(model, joint_name, axis) != "level":
+        return None
+    a = world_rotation(model, joint_name) @ (axis / np.linalg.norm(axis))
+    cosines = np.asarray(faces, float) @ a
+    k = int(np.argmax(np.abs(cosines)))
+    if np.degrees(np.arccos(min(1.0, abs(cosines[k])))) > NEAR_DEG:
+        return None
+    return np.sign(cosines[k]) * np.asarray(faces[k], float)
+
+
+def constraint_rows(model: ArticulatedModel, joint_name: str, kind: str,
+                    direction: np.ndarray | None = None) -> np.ndarray:
     """(k, 3) rows C with C · axis = 0 (axis in the joint frame) for ``kind`` "plumb" (k = 2: the
-    axis has no horizontal component) or "level" (k = 1: it has no vertical one)."""
+    axis has no horizontal component), "level" (k = 1: it has no vertical one) or "square" (k = 2:
+    it lies along ``direction`` (3,), a world direction from :func:`square_direction`)."""
     R = world_rotation(model, joint_name)
+    if kind == "square":
+        d = R.T @ (np.asarray(direction, float) / np.linalg.norm(direction))
+        return tangent_basis(d).T
     up = -np.asarray(model.gravity, float)
     up = R.T @ (up / np.linalg.norm(up))
     return up[None, :] if kind == "level" else tangent_basis(up).T

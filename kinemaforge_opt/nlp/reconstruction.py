@@ -38,8 +38,8 @@ Hessian of the expanded graph, still ``hessian="flat"``) to ~0.5 s; L-BFGS did n
 there.  Coarse-to-fine (:func:`refine_screws`): closed-form init → ``vis`` warm-up
 on the frame grid with correspondences refreshed between solves → the same warm-up with pairs
 beyond 3 robust standard deviations of its settled residuals left out (:func:`residual_gate`) →
-full objective on the dense grid → the same with every axis near plumb or level made so, kept
-when the BIC prefers it (:mod:`.gravity_aligned`).
+full objective on the dense grid → the same with every axis near plumb or level (or square to
+its parent's faces) made so, kept when the BIC prefers it (:mod:`.gravity_aligned`).
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ from ..physics.effects import EFFECTS
 from ..symbolic import build_dynamics
 from .inertial_scales import MIN_COM_SCALE, com_scale, has_axis_ratio, link_axis, scaled_inertial, scaled_parameters
 from .problem import Problem, Result
-from .gravity_aligned import alignment, bic_test, constraint_rows, prefer_aligned, project
+from .gravity_aligned import alignment, bic_test, constraint_rows, prefer_aligned, project, square_direction
 from .structured_hessian import DenseTerms, lagrangian_hessian
 from .visual import Correspondences, SurfaceModel, correspond, surface_model, fixed_subsample, pseudo_huber, robust_value, z_vector
 
@@ -135,8 +135,9 @@ class ScrewOptions:
     (``inertia_prior``; 0 or inf = no prior).  stop_impacts: leave the dynamics and energy terms
     out from the frame before a joint runs into the end of its observed range at speed (an impact
     on a stop, which the NLP does not model) until it has left that end (:func:`stop_spans`).
-    gravity_aligned: after the last dense stage, refit with every axis near plumb or level made
-    so, kept if the BIC prefers it (:mod:`.gravity_aligned`).
+    gravity_aligned: after the last dense stage, refit with every axis near plumb or level (or
+    square to its parent's faces, ``ScrewData.faces``) made so, kept if the BIC prefers it
+    (:mod:`.gravity_aligned`).
     """
 
     vis: bool = True
@@ -186,7 +187,9 @@ class ScrewData:
     gate: correspondence rejection distance [m].  wrenches: recorded forces or None.
     pushed_link: (len(wrenches.t),) name of the link the force acts on per sample ("" = none).
     sightlines: like ``observed``, per point the unit vector towards the cameras that saw it, or
-    None (no far-side test, :func:`~.visual.correspond`).
+    None (no far-side test, :func:`~.visual.correspond`).  faces: link -> (2, 3) the horizontal
+    directions [world, unit] its side faces look along at q = 0
+    (:func:`~.gravity_aligned.face_directions`), for the joints it carries ("square" axes), or None.
     """
 
     model: ArticulatedModel
@@ -199,6 +202,7 @@ class ScrewData:
     wrenches: Wrenches | None = None
     pushed_link: np.ndarray | None = None
     sightlines: dict[str, list[np.ndarray | None]] | None = None
+    faces: dict[str, np.ndarray] | None = None
 
     def __post_init__(self):
         n, T = self.model.nq, self.times.size
@@ -1285,8 +1289,16 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         # gravity-aligned refit fitted it again when the refit above was refused)
         held = frozenset(unsupported)
     if options.gravity_aligned and res.success and fitted_state:
-        aligned = {j.name: (kind, constraint_rows(data.model, j.name, kind)) for k, j in enumerate(data.model.movable_joints)
-                   if (kind := alignment(data.model, j.name, state.axes[k]))}
+        # per joint near plumb or level, its aligned hypotheses (kind, rows), the strongest first
+        aligned: dict[str, list[tuple[str, np.ndarray]]] = {}
+        for k, j in enumerate(data.model.movable_joints):
+            kind = alignment(data.model, j.name, state.axes[k])
+            if kind is None:
+                continue
+            aligned[j.name] = [(kind, constraint_rows(data.model, j.name, kind))]
+            face = square_direction(data.model, j.name, state.axes[k], (data.faces or {}).get(j.parent))
+            if face is not None:
+                aligned[j.name].insert(0, ("square", constraint_rows(data.model, j.name, "square", face)))
         kept: dict[str, np.ndarray] = {}
 
         # The test compares the two fits on a score of the state alone: the robust visual term on
@@ -1306,7 +1318,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             until nothing moves.  Returns (state on the frame grid, its pairs, its truncated
             visual score Σ ρ_δ(r)/δ² + points left out × ``charge``, the number of pairs within
             the gates)."""
-            key = tuple(sorted(rows))
+            key = tuple((name, rows[name].tobytes()) for name in sorted(rows))
             if key in settled_cache:
                 return settled_cache[key]
             cols = np.searchsorted(state.t, data.times)
@@ -1333,13 +1345,13 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             """½χ² of the dynamics, energy and prior terms of a solved fit (objective × normaliser)."""
             return (r.objective - r.costs.get("vis", 0.0)) * n
 
-        def try_aligned(names: list[str]) -> bool:
-            """Refit with ``names`` aligned on top of the joints already kept aligned, on the
-            aligned motion's own settled pairs; keep it if the BIC prefers it to the current fit
-            (the parameters saved: those of ``names``)."""
+        def try_aligned(hypotheses: dict[str, tuple[str, np.ndarray]]) -> bool:
+            """Refit with the joints of ``hypotheses`` (name -> (kind, rows)) aligned on top of the
+            joints already kept aligned, on the aligned motion's own settled pairs; keep it if the
+            BIC prefers it to the current fit (the parameters saved: their rows)."""
             nonlocal sp, res, corr
-            rows = {**kept, **{name: aligned[name][1] for name in names}}
-            saved = sum(aligned[name][1].shape[0] for name in names)
+            rows = {**kept, **{name: r for name, (_, r) in hypotheses.items()}}
+            saved = sum(r.shape[0] for _, r in hypotheses.values())
             n_res = max(sp.n_vis, 1)
             score_free = settled(kept, "gravity_free")[2] + non_visual(res, n_res)
             start, corr_al, vis_al, n_in_al = settled(rows, "gravity_aligned")
@@ -1367,7 +1379,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                 sp_al, res_al, _ = run("gravity_aligned_continued", corr_al, sp.use_dyn, held, converged_only=True,
                                        start=iterate, aligned=rows, accept=accept, stage_options=sp.options, warm=res_al)
             ok = stages[-1]["accepted"]
-            tested = "axes: " + ", ".join(f"{name} {aligned[name][0]}" for name in names)
+            tested = "axes: " + ", ".join(f"{name} {kind}" for name, (kind, _) in hypotheses.items())
             if res_al.success:
                 dchi2, bound = bic_test(j_free, j_aligned(res_al), n_res, saved)
                 notes.append(f"{tested} tested (BIC, {saved} parameters): Δχ² {dchi2:.1f} vs {bound:.1f}, "
@@ -1380,11 +1392,14 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                 settled_cache.clear()
             return ok
 
-        # all at once; refused with several candidates, each on its own (one askew hinge, or a
-        # joint set whose aligned fit does not converge, does not hold back the others)
-        if aligned and not try_aligned(list(aligned)) and len(aligned) > 1:
-            for name in aligned:
-                try_aligned([name])
+        # all at once, each joint's strongest; refused, each joint on its own, strongest first (one
+        # askew hinge, or a joint set whose aligned fit does not converge, does not hold back the
+        # others; a drawer not square to its carcass may still slide level)
+        if aligned and not try_aligned({name: choices[0] for name, choices in aligned.items()}):
+            for name, choices in aligned.items():
+                for choice in choices[1:] if len(aligned) == 1 else choices:
+                    if try_aligned({name: choice}):
+                        break
     model = state_model(data, state)
     cols = np.searchsorted(state.t, data.times)
     terms = {"vis": None, "dyn": None, "energy": None, "inertia_prior": None}

@@ -28,6 +28,7 @@ from ..io.atomic import atomic_path, write_text_atomic
 from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks
 from ..model import ArticulatedModel, Geometry, Inertial, Joint, JointLimits, Link, write_urdf
+from ..nlp.gravity_aligned import face_directions
 from ..nlp.reconstruction import ScrewData, ScrewOptions, ScrewResult, refine_screws, stop_limits, with_ratios
 from ..nlp.visual import surface_model
 from ..parallel import thread_map
@@ -400,7 +401,23 @@ def screw_data(per: Perception, seq, model: ArticulatedModel, lines: dict[str, J
     if w is not None and not any(pushed):
         w, pushed = None, None
     return ScrewData(model, per.times, q0, observed, surfaces, delta=per.voxel, gate=2 * per.inlier_distance,
-                     wrenches=w, pushed_link=pushed, sightlines=sightlines)
+                     wrenches=w, pushed_link=pushed, sightlines=sightlines, faces=parent_faces(model, clouds_world, per.voxel))
+
+
+def parent_faces(model: ArticulatedModel, clouds_world: dict[str, np.ndarray], spacing: float) -> dict[str, np.ndarray]:
+    """Per part that carries a joint, the horizontal directions its side faces look along at q = 0
+    (:func:`~kinemaforge_opt.nlp.gravity_aligned.face_directions`, from the normals of its fused
+    cloud ``clouds_world`` [m] sampled at ``spacing`` [m]); parts too small for a surface or
+    without a square of faces are left out."""
+    out = {}
+    for part in dict.fromkeys(j.parent for j in model.movable_joints):
+        pts = clouds_world.get(part)
+        if pts is None or len(pts) < 50:
+            continue
+        faces = face_directions(surface_model(pts, spacing, part).normals, model.gravity)
+        if faces is not None:
+            out[part] = faces
+    return out
 
 
 def refined_lines(result: ScrewResult, per: Perception, lines: dict[str, JointLine]) -> dict[str, JointLine]:

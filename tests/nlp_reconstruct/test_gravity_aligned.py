@@ -1,5 +1,5 @@
-"""Gravity-aligned axes (nlp.gravity_aligned): the plumb/level hypothesis and its BIC choice in the
-screw NLP, against doors whose true axes are known."""
+"""Gravity-aligned axes (nlp.gravity_aligned): the plumb/level/square hypotheses and their BIC
+choice in the screw NLP, against doors and drawers whose true axes are known."""
 
 from __future__ import annotations
 
@@ -9,11 +9,12 @@ import json
 import numpy as np
 import pytest
 
-from kinemaforge_opt.nlp.gravity_aligned import alignment, constraint_rows, prefer_aligned, project
+from kinemaforge_opt.nlp.gravity_aligned import (alignment, constraint_rows, face_directions, prefer_aligned, project,
+                                                  square_direction)
 from kinemaforge_opt.nlp.reconstruction import ScrewOptions, refine_screws
 from kinemaforge_opt.spatial import axis_angle_error, exp_so3, make_transform, normalize
 
-from .worlds import door_model, noisy_door_data
+from .worlds import box_surface, door_model, noisy_door_data
 
 ORIGIN = np.array([0.3, 0.2, 0.1])
 
@@ -163,3 +164,85 @@ def test_an_aligned_fit_stopped_at_max_iter_is_continued_from_its_iterate(monkey
     assert stages["gravity_aligned_continued"]["success"] and stages["gravity_aligned_continued"]["accepted"]
     assert any(n.startswith("axes: hinge plumb") and n.endswith("kept") for n in r.notes)
     assert _axis_error_deg(r.model, true) < 1e-6
+
+
+GRAVITY = np.array([0.0, 0.0, -9.81])
+
+
+def _yawed(deg: float, v=(0.0, -1.0, 0.0)) -> np.ndarray:
+    return _tilted(deg, about=(0.0, 0.0, 1.0), axis=v)
+
+
+def _carcass_faces(yaw_deg: float = 0.0, normal_sigma: float = 0.0, seed: int = 0) -> np.ndarray:
+    """face_directions of a 0.6 × 0.5 × 0.8 m carcass turned ``yaw_deg`` about the vertical, its
+    normals with Gaussian noise ``normal_sigma``."""
+    _, n = box_surface(np.array([0.6, 0.5, 0.8]), np.zeros(3), 0.02)
+    n = n @ exp_so3(np.array([0.0, 0.0, np.radians(yaw_deg)])).T
+    n = n + np.random.default_rng(seed).normal(0.0, normal_sigma, n.shape)
+    return face_directions(n, GRAVITY)
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 17.0, 44.0, -30.0])
+def test_a_box_s_face_directions_are_found_from_its_noisy_normals(yaw_deg):
+    faces = _carcass_faces(yaw_deg, normal_sigma=0.1)
+    for d in (_yawed(yaw_deg, (1.0, 0.0, 0.0)), _yawed(yaw_deg, (0.0, 1.0, 0.0))):
+        assert np.degrees(np.arccos(np.max(np.abs(faces @ d)))) < 0.3
+    np.testing.assert_allclose(faces @ faces.T, np.eye(2), atol=1e-12)
+    np.testing.assert_allclose(faces @ GRAVITY, 0.0, atol=1e-12)
+
+
+def test_a_round_part_or_no_gravity_has_no_face_directions():
+    phi = np.linspace(0.0, 2 * np.pi, 360, endpoint=False)
+    cylinder = np.column_stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)])
+    assert face_directions(cylinder, GRAVITY) is None
+    _, box = box_surface(np.array([0.6, 0.5, 0.8]), np.zeros(3), 0.02)
+    assert face_directions(box, np.zeros(3)) is None
+
+
+def test_only_a_level_axis_near_a_face_direction_is_square_and_its_rows_fix_it():
+    model = door_model([0, -1, 0], ORIGIN, kind="prismatic")
+    faces = _carcass_faces()
+    for deg in (2.0, -2.5):
+        d = square_direction(model, "hinge", _yawed(deg), faces)
+        np.testing.assert_allclose(d, [0.0, -1.0, 0.0], atol=1e-12)  # signed as the axis
+        np.testing.assert_allclose(project(_yawed(deg), constraint_rows(model, "hinge", "square", d)), d, atol=1e-12)
+    assert square_direction(model, "hinge", _yawed(4.0), faces) is None  # beyond NEAR_DEG
+    assert square_direction(model, "hinge", _yawed(2.0), None) is None  # a parent without faces
+    assert square_direction(model, "hinge", _tilted(2.0), faces) is None  # plumb, not level
+    assert square_direction(model, "hinge", _tilted(10.0, about=(1.0, 0.0, 0.0), axis=_yawed(1.0)), faces) is None
+
+
+def _drawer_data(axis_world: np.ndarray, surface_faces=None):
+    """A drawer (the door slab on a prismatic joint along ``axis_world``, pulled 0.3 m) seen with
+    3 mm noise, the closed form 1.5° off in heading; its carcass's faces square to the world.
+    Returns (true, data)."""
+    true = door_model(axis_world, ORIGIN, kind="prismatic")
+    init = door_model(_tilted(1.5, about=(0.0, 0.0, 1.0), axis=axis_world), ORIGIN + [0.005, -0.004, 0.0],
+                      kind="prismatic", body_origin=ORIGIN)
+    data = noisy_door_data(true, init, 0.003, surface_faces=surface_faces, delta=0.003, opening=0.3)[0]
+    return true, dataclasses.replace(data, faces={"base": _carcass_faces()})
+
+
+def test_a_drawer_whose_heading_only_its_front_shows_slides_square_to_its_carcass():
+    """The surface model holds only the drawer's front and back: point-to-plane pairs on them do
+    not see the slide's heading, and the free fit keeps the closed form's.  The square hypothesis
+    costs nothing and is kept: the slide is exactly along the carcass's depth."""
+    true, data = _drawer_data(np.array([0.0, -1.0, 0.0]), surface_faces=lambda n: np.abs(n[:, 1]) > 0.5)
+    free = refine_screws(data, ScrewOptions(dyn=False, gravity_aligned=False))
+    assert _axis_error_deg(free.model, true) > 0.5
+    r = refine_screws(data, ScrewOptions(dyn=False))
+    assert any(n.startswith("axes: hinge square") and n.endswith("kept") for n in r.notes)
+    assert _axis_error_deg(r.model, true) < 1e-6
+
+
+def test_a_drawer_built_askew_keeps_its_heading_and_slides_level():
+    """A slide 2° off its carcass's depth, every face of the drawer in view: square is refused,
+    then level is kept, the heading the points show."""
+    axis = _yawed(2.0)
+    true, data = _drawer_data(axis)
+    r = refine_screws(data, ScrewOptions(dyn=False))
+    notes = [n for n in r.notes if n.startswith("axes:")]
+    assert notes[0].startswith("axes: hinge square") and notes[0].endswith("refused")
+    assert notes[1].startswith("axes: hinge level") and notes[1].endswith("kept")
+    assert _axis_error_deg(r.model, true) < 0.1
+    assert abs(r.model.joint("hinge").axis[2]) < 1e-9

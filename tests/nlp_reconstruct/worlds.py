@@ -97,13 +97,13 @@ def exact_data(true: ArticulatedModel, init: ArticulatedModel, times: np.ndarray
 
 
 def noisy_door_data(true: ArticulatedModel, init: ArticulatedModel, sigma: float, seed: int = 0,
-                    surface_faces=None, delta: float = 0.002) -> tuple[ScrewData, np.ndarray]:
-    """The door ``true`` opening to 1.4 rad over 8 frames, 400 observed points per frame from every
-    face with isotropic Gaussian noise ``sigma`` [m], the closed form ``init`` (its q with 0.03
-    noise); the surface model holds the faces where ``surface_faces(normals)`` is True (default:
-    all).  Returns (ScrewData, true q (8,))."""
+                    surface_faces=None, delta: float = 0.002, opening: float = 1.4) -> tuple[ScrewData, np.ndarray]:
+    """The door ``true`` opening to ``opening`` [rad, or m for a drawer] over 8 frames, 400
+    observed points per frame from every face with isotropic Gaussian noise ``sigma`` [m], the
+    closed form ``init`` (its q with 0.03 noise); the surface model holds the faces where
+    ``surface_faces(normals)`` is True (default: all).  Returns (ScrewData, true q (8,))."""
     times = np.linspace(0.0, 2.0, 8)
-    q = 1.4 * np.sin(0.7 * times)
+    q = opening * np.sin(0.7 * times)
     rng = np.random.default_rng(seed)
     S, N = door_surface_world(true, 0.01)
     fine, _ = door_surface_world(true, 0.01 / 2.3)
