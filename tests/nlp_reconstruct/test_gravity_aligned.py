@@ -210,6 +210,8 @@ def test_only_a_level_axis_near_a_face_direction_is_square_and_its_rows_fix_it()
     assert square_direction(model, "hinge", _yawed(2.0), None) is None  # a parent without faces
     assert square_direction(model, "hinge", _tilted(2.0), faces) is None  # plumb, not level
     assert square_direction(model, "hinge", _tilted(10.0, about=(1.0, 0.0, 0.0), axis=_yawed(1.0)), faces) is None
+    hinge = door_model([0, -1, 0], ORIGIN)  # a level hinge shows its own axis: not tested square
+    assert square_direction(hinge, "hinge", _yawed(2.0), faces) is None
 
 
 def _drawer_data(axis_world: np.ndarray, surface_faces=None):
