@@ -206,7 +206,8 @@ def test_only_a_level_axis_near_a_face_direction_is_square_and_its_rows_fix_it()
         d = square_direction(model, "hinge", _yawed(deg), faces)
         np.testing.assert_allclose(d, [0.0, -1.0, 0.0], atol=1e-12)  # signed as the axis
         np.testing.assert_allclose(project(_yawed(deg), constraint_rows(model, "hinge", "square", d)), d, atol=1e-12)
-    assert square_direction(model, "hinge", _yawed(4.0), faces) is None  # beyond NEAR_DEG
+    np.testing.assert_allclose(square_direction(model, "hinge", _yawed(8.0), faces), [0.0, -1.0, 0.0], atol=1e-12)
+    assert square_direction(model, "hinge", _yawed(12.0), faces) is None  # beyond SQUARE_NEAR_DEG
     assert square_direction(model, "hinge", _yawed(2.0), None) is None  # a parent without faces
     assert square_direction(model, "hinge", _tilted(2.0), faces) is None  # plumb, not level
     assert square_direction(model, "hinge", _tilted(10.0, about=(1.0, 0.0, 0.0), axis=_yawed(1.0)), faces) is None
@@ -214,12 +215,12 @@ def test_only_a_level_axis_near_a_face_direction_is_square_and_its_rows_fix_it()
     assert square_direction(hinge, "hinge", _yawed(2.0), faces) is None
 
 
-def _drawer_data(axis_world: np.ndarray, surface_faces=None):
+def _drawer_data(axis_world: np.ndarray, surface_faces=None, heading_error_deg: float = 1.5):
     """A drawer (the door slab on a prismatic joint along ``axis_world``, pulled 0.3 m) seen with
-    3 mm noise, the closed form 1.5° off in heading; its carcass's faces square to the world.
-    Returns (true, data)."""
+    3 mm noise, the closed form ``heading_error_deg`` off in heading; its carcass's faces square
+    to the world.  Returns (true, data)."""
     true = door_model(axis_world, ORIGIN, kind="prismatic")
-    init = door_model(_tilted(1.5, about=(0.0, 0.0, 1.0), axis=axis_world), ORIGIN + [0.005, -0.004, 0.0],
+    init = door_model(_tilted(heading_error_deg, about=(0.0, 0.0, 1.0), axis=axis_world), ORIGIN + [0.005, -0.004, 0.0],
                       kind="prismatic", body_origin=ORIGIN)
     data = noisy_door_data(true, init, 0.003, surface_faces=surface_faces, delta=0.003, opening=0.3)[0]
     return true, dataclasses.replace(data, faces={"base": _carcass_faces()})
@@ -227,11 +228,12 @@ def _drawer_data(axis_world: np.ndarray, surface_faces=None):
 
 def test_a_drawer_whose_heading_only_its_front_shows_slides_square_to_its_carcass():
     """The surface model holds only the drawer's front and back: point-to-plane pairs on them do
-    not see the slide's heading, and the free fit keeps the closed form's.  The square hypothesis
-    costs nothing and is kept: the slide is exactly along the carcass's depth."""
-    true, data = _drawer_data(np.array([0.0, -1.0, 0.0]), surface_faces=lambda n: np.abs(n[:, 1]) > 0.5)
+    not see the slide's heading, and the free fit keeps the closed form's, 5° off.  The square
+    hypothesis costs nothing and is kept: the slide is exactly along the carcass's depth."""
+    true, data = _drawer_data(np.array([0.0, -1.0, 0.0]), surface_faces=lambda n: np.abs(n[:, 1]) > 0.5,
+                              heading_error_deg=5.0)
     free = refine_screws(data, ScrewOptions(dyn=False, gravity_aligned=False))
-    assert _axis_error_deg(free.model, true) > 0.5
+    assert _axis_error_deg(free.model, true) > 4.0
     r = refine_screws(data, ScrewOptions(dyn=False))
     assert any(n.startswith("axes: hinge square") and n.endswith("kept") for n in r.notes)
     assert _axis_error_deg(r.model, true) < 1e-6
