@@ -3,27 +3,27 @@ parent.
 
 Furniture and appliances are built square to gravity: door and lid hinges are vertical or
 horizontal, drawer slides level.  They are built square to themselves too: a drawer slides
-straight out of its carcass, a lid turns about an edge of its base.  A drawer's front face
-moving along its own normal leaves the slide's heading (its yaw about the vertical) to the few
-points on its edges, and the free fit of a chest's drawer wandered 3.9° from its carcass's
-depth.  The screw NLP fits every axis freely, and a fit whose visual
+straight out of its carcass.  The screw NLP fits every axis freely, and a fit whose visual
 term barely prefers a tilt of a few tenths of a degree leaves a model that is not in equilibrium
 where the recording rests: a frictionless door on an axis tilted 0.2° swings to the lowest point
 of its circle within the 50-s replay (protocol_refrigerator_1: 0.59 m of drift for the true
-model's 0.05 m).
+model's 0.05 m).  And a drawer's front moving along its own normal leaves the slide's heading
+(its yaw about the vertical) to the few points on its edges: the free fit of a chest's drawer
+kept 3.9° of the closed form's heading error.
 
 For every joint whose fitted axis lies within :data:`NEAR_DEG` of parallel or perpendicular to
 gravity, the constrained fit (``aligned:<joint>`` linear constraints on its axis variable) is a
 nested model with fewer parameters: two for a plumb axis (its direction is fixed), one for a
-level one (its rise is fixed), two for a level slide also within SQUARE_NEAR_DEG of one of its
-parent part's horizontal face directions (:func:`face_directions`; "square": its direction is fixed to
-that face direction, measured on the parent's own points, not the joint's;
-:func:`square_direction`).  A square axis refused is tested level.  It is chosen by the Bayesian information criterion on the
-screw NLP's terms (each ≈ ½ χ²): kept when Δχ² = 2 n (J_aligned − J_free) is at most k ln n, n
-the number of visual residuals and k the parameters it saves.  The visual part of each J is
-scored on the fit's own correspondences (refreshed under its motion until they settle, points
-left out of the gates charged the loss at the gate; :func:`~.reconstruction.refine_screws`), so
-that neither hypothesis is judged on pairs made under the other.  A tilt the data support (a
+level one (its rise is fixed).  A level slide within :data:`SQUARE_NEAR_DEG` of a horizontal
+face direction of its parent part (:func:`face_directions`, measured on the parent's own points)
+is first tested "square": its direction fixed to that face direction, two parameters
+(:func:`square_direction`); refused, it is tested level.  Each hypothesis is chosen by the
+Bayesian information criterion on the screw NLP's terms (each ≈ ½ χ²): kept when
+Δχ² = 2 n (J_aligned − J_free) is at most k ln n, n the number of visual residuals and k the
+parameters it saves.  The visual part of each J is scored on the fit's own correspondences
+(refreshed under its motion until they settle, points left out of the gates charged the loss at
+the gate; :func:`~.reconstruction.refine_screws`), so that neither hypothesis is judged on pairs
+made under the other.  A tilt the data support (a
 concealed axis tilt of a degree, a hinge mounted askew) costs far more than that and stays.
 """
 
@@ -42,6 +42,7 @@ FACE_VOTE_DEG = 30.0
 # A part's horizontal normals name its face directions when their four-fold circular mean has at
 # least this resultant length (1: every vote on a box's four sides; a cylinder's about 0).
 MIN_SQUARENESS = 0.5
+# The directions are the mean again over the votes within this angle of the first mean's square.
 FACE_INLIER_DEG = 5.0
 # A level slide within this angle of a face direction of its parent is tested square.  Wider than
 # NEAR_DEG: the visual term hardly corrects a slide's heading, so the free fit's is about as far
@@ -114,8 +115,8 @@ def square_direction(model: ArticulatedModel, joint_name: str, axis: np.ndarray,
                      faces: np.ndarray | None) -> np.ndarray | None:
     """The face direction (3,) [world, unit, signed as the axis] of ``faces`` (2, 3) (the joint's
     parent part's, :func:`face_directions`) within SQUARE_NEAR_DEG of the level axis (3,) in the
-    joint frame of a prismatic joint, or None (no faces, not prismatic, the axis not level, or no face
-    direction near it).  Only slides: their heading is what point-to-plane pairs see least (a
+    joint frame of a prismatic joint, or None (no faces, not prismatic, the axis not level, or no
+    face direction near it).  Only slides: their heading is what point-to-plane pairs see least (a
     face moving along its normal or within its plane), while a hinge's turning part shows its
     axis better than the parent's faces do (on Table 1's laptops the square hinge was kept by
     the BIC 0.04–0.17° off the truth, the free one 0.006–0.04°)."""
