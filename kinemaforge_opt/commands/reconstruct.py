@@ -72,7 +72,8 @@ def register(subparsers) -> None:
     nlp.add_argument("--energy-weight", type=float, default=1.0, help="weight of the soft energy penalty, default 1")
     nlp.add_argument("--free-axes", dest="gravity_aligned", action="store_false",
                      help="keep every axis as fitted: no refit with the axes within 3° of plumb or level made "
-                          "so (by default that refit is kept when the BIC prefers it; see its note in "
+                          "so, nor with a level slide within 10° of its parent's face direction made square to "
+                          "it (by default each refit is kept when the BIC prefers it; see its note in "
                           "reconstruction.json[\"nlp\"][\"notes\"])")
     p.set_defaults(func=run)
 
