@@ -414,7 +414,11 @@ def parent_faces(model: ArticulatedModel, clouds_world: dict[str, np.ndarray], s
         pts = clouds_world.get(part)
         if pts is None or len(pts) < 50:
             continue
-        faces = face_directions(surface_model(pts, spacing, part).normals, model.gravity)
+        try:
+            normals = surface_model(pts, spacing, part).normals
+        except DataError:  # fewer than 10 voxels: the prior is optional, the reconstruction goes on
+            continue
+        faces = face_directions(normals, model.gravity)
         if faces is not None:
             out[part] = faces
     return out
