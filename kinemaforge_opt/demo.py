@@ -225,7 +225,8 @@ def _dynamics_words(joint: dict) -> str:
 def _match_joints(records: list[dict], true_lines: dict, true_types: dict) -> list[dict]:
     """Each reconstructed movable joint with the closest true joint (axis error + origin error,
     greedily, each true joint used once)."""
-    from .spatial import axis_angle_error, line_distance
+    from .bench.metrics import origin_error_m
+    from .spatial import axis_angle_error
 
     pairs = []
     for r in records:
@@ -236,7 +237,7 @@ def _match_joints(records: list[dict], true_lines: dict, true_types: dict) -> li
             if true_types[name] == "prismatic":
                 dist = 0.0  # a slider's line is only a direction
             else:
-                dist = line_distance(np.asarray(r["axis_world"]), np.asarray(r["origin_world"]), a, o)
+                dist = origin_error_m(np.asarray(r["axis_world"]), np.asarray(r["origin_world"]), a, o)
             pairs.append((ang + dist, r["name"], name, ang, dist))
     used_r, used_t, match = set(), set(), {}
     for _, rn, tn, ang, dist in sorted(pairs):

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from kinemaforge_opt.bench.metrics import JointRecord, part_iou_from_counts
+from kinemaforge_opt.bench.metrics import JointRecord, origin_error_m, part_iou_from_counts
 from kinemaforge_opt.bench.reconstruction import label_confusion, true_joints
 from kinemaforge_opt.graph import infer_tree
 from kinemaforge_opt.graph.tree import GraphResult
@@ -34,7 +34,7 @@ from kinemaforge_opt.io.sequence import load_sequence
 from kinemaforge_opt.perception import perceive
 from kinemaforge_opt.perception.perceive import Perception
 from kinemaforge_opt.perception.reconstruct import BASE, ENVIRONMENT, pixel_labels, point_labels, track_parts
-from kinemaforge_opt.spatial import axis_angle_error, line_distance
+from kinemaforge_opt.spatial import axis_angle_error
 from kinemaforge_opt.synth import generate_case
 from kinemaforge_opt.synth.case import Case
 
@@ -127,7 +127,7 @@ def score(per: Perception, graph: GraphResult, truth: Truth) -> dict:
             if h.axis_world is not None:
                 row["axis_error_deg"] = float(np.degrees(axis_angle_error(h.axis_world, tj.axis_world)))
                 if tj.type in ("revolute", "helical") and h.origin_world is not None:
-                    row["origin_error_m"] = float(line_distance(h.axis_world, h.origin_world, tj.axis_world, tj.origin_world))
+                    row["origin_error_m"] = origin_error_m(h.axis_world, h.origin_world, tj.axis_world, tj.origin_world)
         per_joint.append(row)
     ious = {}
     for c in sorted(true_children):

@@ -102,6 +102,9 @@ VIS_SLACK = 0.5
 PLANE_GATE_SIGMAS = 3.0
 # Points per step that estimate a part's far-side thickness (a median over all steps).
 THICKNESS_SAMPLE = 500
+# A part's far-side slab thickness is fitted in a visual stage when its far-side pairs weigh at
+# least this much (summed IRLS weights: about as many pairs within the robust width).
+MIN_FAR_SIDE_WEIGHT = 10.0
 HESSIANS = ("exact", "gauss_newton", "flat", "lbfgs")
 # Bounds of the mass and inertia ratios (the mesh's mass properties are a guess, not that bad).
 RATIO_BOUNDS = (MIN_COM_SCALE, 50.0)
@@ -137,7 +140,10 @@ class ScrewOptions:
     on a stop, which the NLP does not model) until it has left that end (:func:`stop_spans`).
     gravity_aligned: after the last dense stage, refit with every axis near plumb or level (or
     square to its parent's faces, ``ScrewData.faces``) made so, kept if the BIC prefers it
-    (:mod:`.gravity_aligned`).
+    (:mod:`.gravity_aligned`).  fit_thickness: the visual stages on the frame grid fit each part's
+    far-side slab thickness with its motion (else it is the median depth of the far-side points
+    under the current motion, :func:`far_side_thickness`, re-estimated with each refresh of the
+    pairs); the dense stages hold the last fitted value.
     """
 
     vis: bool = True
@@ -163,6 +169,7 @@ class ScrewOptions:
     inertia_prior_sigma: float = INERTIA_PRIOR_SIGMA
     stop_impacts: bool = True
     gravity_aligned: bool = True
+    fit_thickness: bool = True
 
     def __post_init__(self):
         if self.energy not in ENERGY_MODES:
@@ -234,7 +241,9 @@ class ScrewState:
     """Current estimate.  axes (n, 3) joint frame (unit), origins (n, 3) parent frame [m], pitches (n,)
     [m/rad]; t (G,) grid [s], q (G, n), v (G, n) or None; damping, coulomb (n,); mass_ratio
     {link: ratio of mass and first moment to the mesh's}; inertia_ratio {link: ratio of the inertia
-    about the link's joint axis to the mesh's} (:mod:`.inertial_scales`)."""
+    about the link's joint axis to the mesh's} (:mod:`.inertial_scales`); thickness {link: the slab
+    thickness [m] of its far side (:func:`~.visual.correspond`) as last fitted; empty until a
+    visual stage fits it}."""
 
     axes: np.ndarray
     origins: np.ndarray
@@ -246,6 +255,7 @@ class ScrewState:
     coulomb: np.ndarray
     inertia_ratio: dict[str, float] = field(default_factory=dict)
     mass_ratio: dict[str, float] = field(default_factory=dict)
+    thickness: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, eq=False)
@@ -462,7 +472,9 @@ def correspondences(data: ScrewData, state: ScrewState, size: int, seed: int = 0
             blocks.append((pts[pick], Ts[s], None if sight is None else sight[pick]))
         surface = data.surfaces[link]
         # only an oriented surface has a far side (correspond ignores the thickness otherwise)
-        thickness = far_side_thickness(surface, blocks, delta) if data.sightlines is not None and surface.oriented else None
+        thickness = None
+        if data.sightlines is not None and surface.oriented:
+            thickness = state.thickness[link] if link in state.thickness else far_side_thickness(surface, blocks, delta)
         out[link] = [correspond(pts, T, surface, data.gate, size, delta, plane_gate, sight, thickness)
                      for pts, T, sight in blocks]
     return out
@@ -508,7 +520,7 @@ def vis_value(data: ScrewData, state: ScrewState, corr: dict[str, list[Correspon
     total = 0.0
     for link, items in corr.items():
         Ts = transforms_world0_t(model, link, state.q[cols])
-        total += sum(robust_value(c, T, data.delta) for c, T in zip(items, Ts))
+        total += sum(robust_value(c, T, data.delta, state.thickness.get(link)) for c, T in zip(items, Ts))
     return float(total)
 
 
@@ -828,14 +840,28 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         total = ca.MX(0)
         qs = ca.SX.sym("q", n)
         for link, items in corr.items():
-            Hs = ca.SX.sym("H", 13, 13)
             Tm = _transforms_world0_t(dyn, theta_sx, model.link_names.index(link), qs, ca.DM.zeros(n))
             zv = z_vector(Tm)
-            step = ca.Function(f"vis_{link}", [qs, theta_sx, Hs],
-                               [0.5 * ca.mtimes([zv.T, Hs, zv]) / data.delta**2], jit)
-            mapped = step.map(len(items))
-            vals = mapped(Q[:, frame_cols.tolist()], theta_mx, np.hstack([c.H for c in items]))
-            vis_blocks.append((step, frame_cols, np.hstack([c.H for c in items])))
+            made_at = items[0].thickness if items else None
+            far_pairs = sum(float(c.H_thickness[13, 13]) for c in items) if made_at is not None else 0.0
+            if not dense and options.fit_thickness and far_pairs >= MIN_FAR_SIDE_WEIGHT:
+                # the part's far side is a slab whose thickness is fitted with the motion: held at
+                # the median depth of the far-side points under the current motion, a hinge off
+                # along the part and a too-thin slab explain a turned part's far side alike
+                # (protocol_laptop_0@s2: a 2 mm slab for a 7.7 mm lid, the hinge 5.6 mm off)
+                # (within one gate of where its pairs were made: beyond it they would not pair)
+                t_var = prob.variable(f"thickness:{link}", 1, lower=0.0, upper=made_at + data.gate, init=made_at)
+                Hs, dt = ca.SX.sym("H", 14, 14), ca.SX.sym("dt")
+                zt = ca.vertcat(zv, dt)
+                step = ca.Function(f"vis_{link}", [qs, theta_sx, Hs, dt], [0.5 * ca.mtimes([zt.T, Hs, zt]) / data.delta**2], jit)
+                vals = step.map(len(items))(Q[:, frame_cols.tolist()], theta_mx, np.hstack([c.H_thickness for c in items]),
+                                            t_var - made_at)
+            else:
+                Hs = ca.SX.sym("H", 13, 13)
+                step = ca.Function(f"vis_{link}", [qs, theta_sx, Hs],
+                                   [0.5 * ca.mtimes([zv.T, Hs, zv]) / data.delta**2], jit)
+                vals = step.map(len(items))(Q[:, frame_cols.tolist()], theta_mx, np.hstack([c.H for c in items]))
+                vis_blocks.append((step, frame_cols, np.hstack([c.H for c in items])))
             total = total + ca.sum2(vals)
             n_vis += int(sum(c.weights.sum() for c in items))
         terms["vis"] = total
@@ -1054,7 +1080,8 @@ def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
             origins[k] = vals[f"origin:{j.name}"]
         if f"pitch:{j.name}" in vals:
             pitches[k] = float(vals[f"pitch:{j.name}"][0])
-    ratios = {"mass_ratio": dict(st.mass_ratio), "inertia_ratio": dict(st.inertia_ratio)}
+    ratios = {"mass_ratio": dict(st.mass_ratio), "inertia_ratio": dict(st.inertia_ratio),
+              "thickness": dict(st.thickness)}
     for name, v in vals.items():
         kind, _, link = name.partition(":")
         if kind in ratios:
@@ -1075,7 +1102,7 @@ def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
             if f"coulomb:{j.name}" in vals:
                 coulomb[k] = max(float(vals[f"coulomb:{j.name}"][0]) * fs, 0.0)
     return ScrewState(axes, origins, pitches, st.t.copy(), q, v, damping, coulomb, ratios["inertia_ratio"],
-                      ratios["mass_ratio"])
+                      ratios["mass_ratio"], ratios["thickness"])
 
 
 FRICTION_PARAMETERS = ("damping:", "coulomb:")
@@ -1254,6 +1281,9 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                 break
         notes.append(f"vis: pairs off their tangent plane by more than {plane_gate * 1e3:.1f} mm left out "
                      "(3 robust standard deviations of the warm-up's residuals)")
+        if state.thickness:
+            notes.append("vis: far-side slab thickness fitted with the motion: " + ", ".join(
+                f"{link} {t * 1e3:.1f} mm" for link, t in sorted(state.thickness.items())))
         corr = correspondences(data, state, size, plane_gate=plane_gate)
     else:
         plane_gate = np.inf

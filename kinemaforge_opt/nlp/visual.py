@@ -111,7 +111,11 @@ class Correspondences:
     normals (3, N) at the zero configuration, gate weights (N,) (0 = rejected or padding), IRLS
     weights (N,), the moment matrix H (13, 13) of the gated, IRLS-weighted pairs, the
     point-to-plane residuals (N,) [m] under the motion the pairs were made at, and which pairs
-    are with the far side of the surface (N,) bool (see :func:`correspond`)."""
+    are with the far side of the surface (N,) bool (see :func:`correspond`).  thickness: the
+    slab thickness [m] the far-side pairs were made with (None: no far side modelled);
+    H_thickness (14, 14): the moment matrix of the rows [a, f] with f = −1 on the modelled
+    far-side pairs, so that the IRLS cost at thickness ``thickness + Δ`` is [z; Δ]ᵀ H_thickness [z; Δ]
+    (a far-side residual is r = aᵀz − Δ: its target plane moves Δ further into the part)."""
 
     observed: np.ndarray
     targets: np.ndarray
@@ -121,6 +125,8 @@ class Correspondences:
     H: np.ndarray
     residuals: np.ndarray
     far_side: np.ndarray
+    thickness: float | None = None
+    H_thickness: np.ndarray | None = None
 
 
 def linear_rows(observed: np.ndarray, targets: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -194,10 +200,18 @@ def correspond(observed_world: np.ndarray, T_world0_t: np.ndarray, surface: Surf
     keep &= (d <= gate) & (np.abs(r[:m]) <= plane_gate)
     w[:m] = keep.astype(float)
     irls = w / np.sqrt(1.0 + (r / delta) ** 2)
-    return Correspondences(obs, tgt, nrm, w, irls, (A * irls[:, None]).T @ A, r, far)
+    modelled = thickness is not None and sightlines is not None and surface.oriented
+    Af = np.hstack([A, -(far & modelled).astype(float)[:, None]])
+    Hf = (Af * irls[:, None]).T @ Af
+    return Correspondences(obs, tgt, nrm, w, irls, Hf[:13, :13], r, far,
+                           float(thickness) if modelled else None, Hf if modelled else None)
 
 
-def robust_value(c: Correspondences, T_world0_t: np.ndarray, delta: float) -> float:
-    """Σ gate-weight · ρ_δ(r) / δ² of one correspondence block under the motion ``T_world0_t``."""
+def robust_value(c: Correspondences, T_world0_t: np.ndarray, delta: float, thickness: float | None = None) -> float:
+    """Σ gate-weight · ρ_δ(r) / δ² of one correspondence block under the motion ``T_world0_t``,
+    its far-side pairs (if modelled) at the slab ``thickness`` [m] (None: the one they were made
+    with)."""
     r = point_to_plane(T_world0_t, c.targets, c.normals, c.observed)
+    if c.thickness is not None and thickness is not None:
+        r = r - (thickness - c.thickness) * c.far_side
     return float(np.sum(c.weights * pseudo_huber(r, delta)) / delta**2)

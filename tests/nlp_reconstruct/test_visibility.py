@@ -64,6 +64,35 @@ def test_a_point_on_the_far_side_pairs_with_the_slab_or_is_left_out():
     assert turned_back.far_side[:n].all()
 
 
+def test_the_thickness_moments_give_the_far_side_residuals_at_another_thickness():
+    """Pairs made with a 2 cm slab: the (14, 14) moments in [z; Δ] give Σ w r² of the pairs at
+    2 cm + Δ, and robust_value at 2 cm + Δ is the loss of those residuals (far side moved Δ)."""
+    from kinemaforge_opt.nlp.visual import pseudo_huber, robust_value, z_vector
+
+    top = _plate()
+    surface = SurfaceModel("plate", top, np.tile([0.0, 0.0, 1.0], (len(top), 1)), oriented=True)
+    rng = np.random.default_rng(1)
+    below = top[::7] + [0.002, 0.003, -0.023] + rng.normal(0, 0.001, (len(top[::7]), 3))
+    above = top[::9] + [0.001, 0.0, 0.001]
+    up = np.tile([0.0, 0.1, 1.0], (len(above), 1)) / np.sqrt(1.01)
+    down = np.tile([0.0, 0.1, -1.0], (len(below), 1)) / np.sqrt(1.01)
+    T = np.eye(4)
+    c = correspond(np.vstack([above, below]), T, surface, 0.05, 128, 0.002, sightlines=np.vstack([up, down]),
+                   thickness=0.02)
+    assert c.thickness == 0.02 and c.far_side.sum() == len(below)
+    # the underside lies 2.3 cm below the top face: 3 mm beyond a 2 cm slab, on a 2.3 cm one
+    assert np.mean(c.residuals[c.far_side]) == pytest.approx(0.003, abs=5e-4)
+    assert np.mean((c.residuals - 0.003 * c.far_side)[c.far_side]) == pytest.approx(0.0, abs=5e-4)
+    for dt in (0.0, 0.003, -0.005):
+        r = c.residuals - dt * c.far_side
+        zt = np.append(z_vector(T), dt)
+        assert zt @ c.H_thickness @ zt == pytest.approx(np.sum(c.irls * r**2), rel=1e-9)
+        assert robust_value(c, T, 0.002, 0.02 + dt) == pytest.approx(
+            np.sum(c.weights * pseudo_huber(r, 0.002)) / 0.002**2, rel=1e-9)
+    np.testing.assert_allclose(c.H_thickness[:13, :13], c.H)
+    assert correspond(below, T, surface, 0.05, 64, 0.002).H_thickness is None
+
+
 def test_the_far_side_thickness_of_a_slab_is_its_thickness():
     """A 3 cm plate seen from both sides (top face modelled): the underside's points, 2 mm noise,
     give the plate's thickness; a plate seen from above only gives none."""
@@ -106,6 +135,24 @@ def test_the_inner_face_of_an_opened_door_is_its_far_side_not_its_front():
     assert tilt > 0.8 and offset > 0.004
     tilt, offset = _hinge_offset(seeing)
     assert tilt < 0.3 and offset < 0.005
+
+
+@pytest.mark.parametrize("offset", [[-0.008, 0.0, 0.0], [0.0, -0.008, 0.0]])
+def test_a_far_side_seen_only_once_the_part_has_turned_is_fitted_with_the_motion(offset):
+    """One camera sees the 4 cm door's front while it is shut and only its inner face once it has
+    opened, as a laptop's lid shows its top closed and its underside open.  From a closed form
+    whose hinge is 8 mm off, the slab thickness held at the median depth of the far-side points
+    under the current motion absorbs the offset (the hinge stays 5-7 mm off); fitted with the
+    motion, the hinge comes back within 0.5 mm and the thickness within 1 mm of the truth."""
+    true = door_model(np.array([0.0, 0.0, 1.0]), ORIGIN)
+    init = door_model(np.array([0.0, 0.0, 1.0]), ORIGIN + offset, body_origin=ORIGIN)
+    data = seen_door_data(true, init, np.array([[1.8, 1.5, 0.6]]), 0.002)[0]
+    held = refine_screws(data, ScrewOptions(dyn=False, gravity_aligned=False, fit_thickness=False))
+    fitted = refine_screws(data, ScrewOptions(dyn=False, gravity_aligned=False))
+    assert _hinge_offset(held)[1] > 0.004 and held.state.thickness == {}
+    assert _hinge_offset(fitted)[1] < 0.0005
+    assert fitted.state.thickness["door"] == pytest.approx(0.04, abs=0.001)
+    assert any("far-side slab thickness fitted" in n for n in fitted.notes)
 
 
 def test_sightlines_that_do_not_match_the_points_are_refused_by_part():
