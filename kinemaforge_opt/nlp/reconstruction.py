@@ -848,8 +848,8 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
                 # the part's far side is a slab whose thickness is fitted with the motion: held at
                 # the median depth of the far-side points under the current motion, a hinge off
                 # along the part and a too-thin slab explain a turned part's far side alike
-                # (protocol_laptop_0@s2: a 2 mm slab for a 7.7 mm lid, the hinge 5.6 mm off)
-                # (within one gate of where its pairs were made: beyond it they would not pair)
+                # (protocol_laptop_0@s2: a 2 mm slab for a 7.7 mm lid, the hinge 5.6 mm off).  At
+                # most one gate thicker than the pairs were made at: beyond it they would not pair.
                 t_var = prob.variable(f"thickness:{link}", 1, lower=0.0, upper=made_at + data.gate, init=made_at)
                 Hs, dt = ca.SX.sym("H", 14, 14), ca.SX.sym("dt")
                 zt = ca.vertcat(zv, dt)
