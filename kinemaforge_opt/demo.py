@@ -237,7 +237,7 @@ def _match_joints(records: list[dict], true_lines: dict, true_types: dict) -> li
             if true_types[name] == "prismatic":
                 dist = 0.0  # a slider's line is only a direction
             else:
-                dist = origin_error_m(np.asarray(r["axis_world"]), np.asarray(r["origin_world"]), a, o)
+                dist = origin_error_m(np.asarray(r["axis_world"]), np.asarray(r["origin_world"]), o)
             pairs.append((ang + dist, r["name"], name, ang, dist))
     used_r, used_t, match = set(), set(), {}
     for _, rn, tn, ang, dist in sorted(pairs):

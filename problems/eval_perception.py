@@ -127,7 +127,7 @@ def score(per: Perception, graph: GraphResult, truth: Truth) -> dict:
             if h.axis_world is not None:
                 row["axis_error_deg"] = float(np.degrees(axis_angle_error(h.axis_world, tj.axis_world)))
                 if tj.type in ("revolute", "helical") and h.origin_world is not None:
-                    row["origin_error_m"] = origin_error_m(h.axis_world, h.origin_world, tj.axis_world, tj.origin_world)
+                    row["origin_error_m"] = origin_error_m(h.axis_world, h.origin_world, tj.origin_world)
         per_joint.append(row)
     ious = {}
     for c in sorted(true_children):

@@ -27,16 +27,15 @@ def axis_error_deg(axis_est, axis_true) -> float:
     return float(np.degrees(axis_angle_error(a, b)))
 
 
-def origin_error_m(axis_est, origin_est, axis_true, origin_true) -> float:
+def origin_error_m(axis_est, origin_est, origin_true) -> float:
     """Distance [m] from the true joint origin (``origin_true``, the true line's point at the
     part) to the estimated joint line (origin_est + s·axis_est); parallel lines give their
-    separation.  ``axis_true`` is not needed (kept for the call's symmetry).  Meaningful for
-    revolute (and helical) joints; a prismatic joint has no line (callers skip it).
+    separation.  Meaningful for revolute (and helical) joints; a prismatic joint has no line
+    (callers skip it).
 
     Not the two lines' shortest distance: two lines nearly parallel come closest far from the
     part (a lid's hinge 5.6 mm off and 0.04° askew comes within 0.9 mm of the true one 8 m
     away, protocol_laptop_0@s2), so that distance hid the error where the part turns."""
-    del axis_true
     a = np.asarray(axis_est, dtype=float)
     if a.shape != (3,) or np.linalg.norm(a) < 1e-12:
         raise DataError(f"origin error needs a non-zero 3-vector axis, got {a.tolist()}")
@@ -141,7 +140,7 @@ class JointScore:
 def _geometric_cost(e: JointRecord, t: JointRecord, length_scale_m: float) -> float:
     c = np.radians(axis_error_deg(e.axis_world, t.axis_world))
     if t.type != "prismatic" and e.type != "prismatic":
-        c += origin_error_m(e.axis_world, e.origin_world, t.axis_world, t.origin_world) / length_scale_m
+        c += origin_error_m(e.axis_world, e.origin_world, t.origin_world) / length_scale_m
     return float(c)
 
 
@@ -179,7 +178,7 @@ def match_joints(est: Sequence[JointRecord], true: Sequence[JointRecord], pred_t
         ei, how = pairs[ti]
         e = est[ei]
         ax = axis_error_deg(e.axis_world, t.axis_world)
-        org = None if t.type == "prismatic" else origin_error_m(e.axis_world, e.origin_world, t.axis_world, t.origin_world)
+        org = None if t.type == "prismatic" else origin_error_m(e.axis_world, e.origin_world, t.origin_world)
         out.append(JointScore(t.name, t.type, e.name, e.type, ax, org, e.type == t.type, how))
     return out
 

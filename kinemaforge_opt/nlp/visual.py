@@ -178,10 +178,12 @@ def correspond(observed_world: np.ndarray, T_world0_t: np.ndarray, surface: Surf
     targets = surface.points[idx]
     keep = np.ones(m, dtype=bool)
     far = np.zeros(size, dtype=bool)
-    if sightlines is not None and surface.oriented and m:
+    far_test = sightlines is not None and surface.oriented
+    modelled = far_test and thickness is not None  # the far side is a slab, else left out
+    if far_test and m:
         # n·(Rᵀ s) = (R n)·s < 0: the moved surface point faces away from the camera
         far[:m] = np.sum(surface.normals[idx] * (sightlines @ R), axis=1) < 0
-        if thickness is None:
+        if not modelled:
             keep = ~far[:m]
         else:  # the far side: the surface moved ``thickness`` into the part
             targets = targets - thickness * far[:m, None] * surface.normals[idx]
@@ -200,11 +202,11 @@ def correspond(observed_world: np.ndarray, T_world0_t: np.ndarray, surface: Surf
     keep &= (d <= gate) & (np.abs(r[:m]) <= plane_gate)
     w[:m] = keep.astype(float)
     irls = w / np.sqrt(1.0 + (r / delta) ** 2)
-    modelled = thickness is not None and sightlines is not None and surface.oriented
-    Af = np.hstack([A, -(far & modelled).astype(float)[:, None]])
+    if not modelled:
+        return Correspondences(obs, tgt, nrm, w, irls, (A * irls[:, None]).T @ A, r, far)
+    Af = np.hstack([A, -far[:, None].astype(float)])
     Hf = (Af * irls[:, None]).T @ Af
-    return Correspondences(obs, tgt, nrm, w, irls, Hf[:13, :13], r, far,
-                           float(thickness) if modelled else None, Hf if modelled else None)
+    return Correspondences(obs, tgt, nrm, w, irls, Hf[:13, :13], r, far, float(thickness), Hf)
 
 
 def robust_value(c: Correspondences, T_world0_t: np.ndarray, delta: float, thickness: float | None = None) -> float:

@@ -38,23 +38,23 @@ def test_axis_error_refuses_zero_axis():
 def test_origin_error_is_the_estimated_lines_distance_from_the_true_origin():
     z = np.array([0.0, 0.0, 1.0])
     # parallel vertical lines 5 cm apart, origins at different heights along the line
-    assert origin_error_m(z, [0.3, 0.2, 0.0], z, [0.3, 0.25, 0.7]) == pytest.approx(0.05)
+    assert origin_error_m(z, [0.3, 0.2, 0.0], [0.3, 0.25, 0.7]) == pytest.approx(0.05)
     # the same line given by two different points and opposite directions
-    assert origin_error_m(z, [1.0, 1.0, 0.0], -z, [1.0, 1.0, 5.0]) == pytest.approx(0.0, abs=1e-12)
+    assert origin_error_m(z, [1.0, 1.0, 0.0], [1.0, 1.0, 5.0]) == pytest.approx(0.0, abs=1e-12)
     # skew lines: the estimate (the x-axis) passes 1 m beside the true origin (2, -1, 0.1), although
     # the two lines come within 0.1 m of each other at x = 2
-    assert origin_error_m([1, 0, 0], [0, 0, 0], [0, 1, 0], [2.0, -1.0, 0.1]) == pytest.approx(np.hypot(1.0, 0.1))
+    assert origin_error_m([1, 0, 0], [0, 0, 0], [2.0, -1.0, 0.1]) == pytest.approx(np.hypot(1.0, 0.1))
     # a hinge 5.6 mm off along y and 0.04 deg askew: 5.6 mm at the part, although the lines meet
     # (to within 0.9 mm) about 8 m away
     tilt = np.radians(0.04)
     est = np.array([np.cos(tilt), np.sin(tilt), 0.0])
-    assert origin_error_m(est, [0.0, 0.2518, 0.0145], [1, 0, 0], [0.0, 0.2574, 0.0136]) == pytest.approx(
+    assert origin_error_m(est, [0.0, 0.2518, 0.0145], [0.0, 0.2574, 0.0136]) == pytest.approx(
         np.hypot(0.0056, 0.0009), rel=1e-3)
 
 
 def test_origin_error_refuses_zero_axis():
     with pytest.raises(DataError, match="non-zero 3-vector axis"):
-        origin_error_m([0, 0, 0], [0, 0, 0], [0, 0, 1], [0, 0, 0])
+        origin_error_m([0, 0, 0], [0, 0, 0], [0, 0, 0])
 
 
 def test_part_iou_is_invariant_to_label_names_and_order():
