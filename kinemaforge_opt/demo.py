@@ -159,6 +159,8 @@ class MainDemoReport:
     paths: dict[str, Path]
 
     def summary(self) -> str:
+        from .verify.report import energy_text
+
         lines = ["reconstructed joints (errors against the ground truth):"]
         for j in self.joints:
             err = ("  (no true joint left to match: spurious)" if j.get("axis_error_deg") is None else
@@ -173,7 +175,7 @@ class MainDemoReport:
             return ", ".join(f"{h} s {100 * d:.1f} cm" + ("*" if v["beyond_recording"][h] else "")
                              for h, d in check["drift_m"].items())
 
-        lines.append(f"Drake verification: drift {drift(v)}; energy residual {v['energy_residual']:.3f}")
+        lines.append(f"Drake verification: drift {drift(v)}; energy residual {energy_text(v['energy_residual'], '.3f')}")
         lines.append(f"  (* past the {v['recording_duration_s']:.1f} s recording: distance to its last pose, held)")
         lines.append("mismatch discovery on the reconstruction:")
         lines += ["  " + line for line in self.diagnosis_summary.splitlines()]
@@ -184,7 +186,7 @@ class MainDemoReport:
             lines.append("Drake verification of the diagnosed model: no effect was added (same model as above)")
         else:
             lines.append(f"Drake verification of the diagnosed model: drift {drift(a)}; energy residual "
-                         f"{a['energy_residual']:.3f}")
+                         f"{energy_text(a['energy_residual'], '.3f')}")
         lines.append("time per stage: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.timing_s.items()))
         lines.append("files:")
         for k, p in self.paths.items():

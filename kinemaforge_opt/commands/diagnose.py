@@ -135,12 +135,13 @@ def run(args) -> int:
 
         from ..io.atomic import write_text_atomic
         from ..verify.reconstruction import verify_model
+        from ..verify.report import energy_text
 
         after = verify_model(d.model, args.model, args.sequence)
         paths["verification"] = Path(args.out) / "verification.json"
         write_text_atomic(paths["verification"], json.dumps(after, indent=2))
         drift = ", ".join(f"{h} s: {v:.3g}" for h, v in after["drift_m"].items())
-        print(f"Drake check of the augmented model: drift [m] {drift}; energy residual {after['energy_residual']:.3g}")
+        print(f"Drake check of the augmented model: drift [m] {drift}; energy residual {energy_text(after['energy_residual'])}")
     print("wrote " + ", ".join(str(p) for p in paths.values()))
     return 0
 

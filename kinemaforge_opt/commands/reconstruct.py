@@ -155,6 +155,7 @@ def _run_sequence(args) -> int:
     from ..nlp.reconstruction import ScrewOptions
     from ..perception.reconstruct import DEFAULT_DENSITY, reconstruct_sequence
     from ..verify.reconstruction import verify_reconstruction
+    from ..verify.report import energy_text
 
     density = DEFAULT_DENSITY if args.density is None else args.density
     rec = reconstruct_sequence(args.input, args.out, method=args.method, k_best=args.k_best, density=density,
@@ -181,7 +182,7 @@ def _run_sequence(args) -> int:
         print(f"kinemaforge reconstruct: the Drake verification failed: {e}", file=sys.stderr)
         return 1
     drift = ", ".join(f"{h} s: {d:.3g}" + ("*" if v["beyond_recording"][h] else "") for h, d in v["drift_m"].items())
-    print(f"Drake verification ({v['forcing']}): drift [m] {drift}; energy residual {v['energy_residual']:.3g} "
+    print(f"Drake verification ({v['forcing']}): drift [m] {drift}; energy residual {energy_text(v['energy_residual'])} "
           f"({v['timing_s']['total']:.1f} s)")
     print(f"  * past the {v['recording_duration_s']:.1f} s recording: distance to its last pose, held")
     if v["contacts"] == [] and v["forcing"].startswith("none"):

@@ -71,7 +71,7 @@ def _horizons(text: str) -> tuple[float, ...]:
 def run(args) -> int:
     from ..io.recording import read_recording
     from ..model import read_urdf
-    from ..verify.report import verify_free, verify_recording
+    from ..verify.report import energy_text, verify_free, verify_recording
 
     horizons = _horizons(args.horizons)
     model = read_urdf(args.model)
@@ -87,6 +87,6 @@ def run(args) -> int:
     path = out / "verification.json"
     write_text_atomic(path, json.dumps(result, indent=2) + "\n")
     summary = ", ".join(f"{h} s: {d:.3g} m" for h, d in result["drift_m"].items())
-    print(f"energy residual {result['energy_residual']:.3g}" + (f"; drift {summary}" if summary else ""))
+    print(f"energy residual {energy_text(result['energy_residual'])}" + (f"; drift {summary}" if summary else ""))
     print(path)
     return 0

@@ -68,18 +68,24 @@ def surface_model(points_world0: np.ndarray, spacing: float, name: str, max_poin
     pts = np.asarray(points_world0, dtype=float)
     if len(pts) < 10:
         raise DataError(f"part {name!r}: {len(pts)} points; a surface model needs at least 10")
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
-    if sightlines is not None:
-        # open3d averages a cloud's normals when it downsamples and orients the normals it
-        # estimates along the ones a cloud already has: the sightlines ride along as normals
-        pcd.normals = o3d.utility.Vector3dVector(np.asarray(sightlines, dtype=float))
+    # the perception's voxel grid (cells at multiples of the edge, points in input order), not
+    # open3d's (anchored at the cloud's per-axis minimum, in hash order): the same scene in a
+    # world with permuted axes then gets the same surface model, turned
+    from ..perception.clouds import downsample
+
+    cols = pts if sightlines is None else np.hstack([pts, np.asarray(sightlines, dtype=float)])
     voxel = spacing
-    down = pcd.voxel_down_sample(voxel)
-    while len(down.points) > max_points:
+    down_cols = downsample(cols, voxel)
+    while len(down_cols) > max_points:
         voxel *= 1.3
-        down = pcd.voxel_down_sample(voxel)
-    if len(down.points) < 10:
-        raise DataError(f"part {name!r}: {len(down.points)} points after downsampling to {voxel:.3g} m; need at least 10")
+        down_cols = downsample(cols, voxel)
+    if len(down_cols) < 10:
+        raise DataError(f"part {name!r}: {len(down_cols)} points after downsampling to {voxel:.3g} m; need at least 10")
+    down = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(down_cols[:, :3]))
+    if sightlines is not None:
+        # open3d orients the normals it estimates along the ones a cloud already has: the
+        # sightlines, averaged over each voxel, ride along as normals
+        down.normals = o3d.utility.Vector3dVector(down_cols[:, 3:])
     down.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=4 * voxel, max_nn=20))
     normals = np.asarray(down.normals, dtype=float)
     return SurfaceModel(name, np.asarray(down.points, dtype=float), normals / np.linalg.norm(normals, axis=1, keepdims=True),

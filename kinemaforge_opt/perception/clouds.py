@@ -199,7 +199,13 @@ def downsample(points: np.ndarray, voxel: float, outliers: bool = False) -> np.n
     k -= k.min(axis=0)
     span = k.max(axis=0) + 1
     key = (k[:, 0] * span[1] + k[:, 1]) * span[2] + k[:, 2]
-    _, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    _, first, inv, count = np.unique(key, return_index=True, return_inverse=True, return_counts=True)
+    # voxels in the order of their first input point, not of their keys: the keys' order follows
+    # the world axes, and later stages subsample by index (every k-th point, seeded subsets), so a
+    # key order would make them pick other points when the same scene comes in a rotated world
+    rank = np.empty_like(first)
+    rank[np.argsort(first, kind="stable")] = np.arange(first.size)
+    inv, count = rank[inv], count[np.argsort(first, kind="stable")]
     out = np.stack([np.bincount(inv, points[:, j], minlength=count.size) for j in range(points.shape[1])], axis=1) / count[:, None]
     if outliers and len(out) > OUTLIER_MIN_NEIGHBOURS:
         # a centroid is kept when its OUTLIER_MIN_NEIGHBOURS nearest others are all within the

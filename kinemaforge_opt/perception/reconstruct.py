@@ -278,7 +278,7 @@ def part_masses(per: Perception, reps: dict[str, int], labels: list[np.ndarray],
 
 def build_model(per: Perception, graph: GraphResult, density: float, name: str = "reconstruction",
                 lines: dict[str, JointLine] | None = None, labels: list[np.ndarray] | None = None,
-                masses: dict[str, MassProperties] | None = None):
+                masses: dict[str, MassProperties] | None = None, gravity=(0.0, 0.0, -9.81)):
     """Kinematic tree + fused points -> (ArticulatedModel, joint records, part clouds at zero,
     meshes, point labels, part masses, mass report).  Joint records follow the
     reconstruction.json contract.  Moving links' mass properties come from :func:`part_masses`
@@ -286,7 +286,8 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
     the volume model and the mass the whole cloud's hull would have had [kg].  ``lines``: the
     joints as world lines (default: :func:`closed_form_lines`, the graph's closed form).
     ``labels`` (:func:`point_labels`) and ``masses`` (:func:`part_masses`) when already computed:
-    neither depends on ``lines``."""
+    neither depends on ``lines``.  ``gravity``: (3,) world gravity [m/s²], the sequence's (the
+    root link's frame is the world frame)."""
     tracks, tree = per.tracks, graph.best
     lines = closed_form_lines(per, graph) if lines is None else lines
     part_of = track_parts(graph, tracks)
@@ -351,7 +352,7 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
         links.append(Link(p, inertial, (g,), (g,)))
         T = T_world_link0[p]
         clouds_world[p] = pts @ T[:3, :3].T + T[:3, 3]
-    model = ArticulatedModel(name, tuple(links), tuple(joints))
+    model = ArticulatedModel(name, tuple(links), tuple(joints), gravity=np.asarray(gravity, float))
     return model, records, clouds_world, meshes, labels, masses, mass_report
 
 
@@ -474,7 +475,8 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
     build_model's first five, the ``nlp`` document (None without NLP) and build_model's mass
     report."""
     lines = closed_form_lines(per, graph)
-    model, records, clouds_world, meshes, labels, masses, mass_report = build_model(per, graph, density, name, lines)
+    model, records, clouds_world, meshes, labels, masses, mass_report = build_model(per, graph, density, name, lines,
+                                                                                   gravity=seq.gravity)
     if not model.movable_joints:
         return model, records, clouds_world, meshes, labels, None, mass_report
     if options is None:
@@ -489,7 +491,7 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
     # motion then claim their insides for the meshes and the reported labels
     labels = _with_part_solids(per, labels, moved, q)
     model, records, clouds_world, meshes, labels, _, mass_report = build_model(per, graph, density, name, final_lines,
-                                                                               labels, masses)
+                                                                               labels, masses, seq.gravity)
     if options is None:
         return model, records, clouds_world, meshes, labels, None, mass_report
     model = _apply_identified(model, records, result, data.model)

@@ -319,7 +319,7 @@ def icp(source: np.ndarray, tree: cKDTree, target: np.ndarray, T0: np.ndarray, r
                 break
             dT = kabsch(moved[ok], target[idx[ok]])
             T = dT @ T
-            step = np.abs(moved @ (dT[:3, :3] - np.eye(3)).T + dT[:3, 3]).max()
+            step = np.linalg.norm(moved @ (dT[:3, :3] - np.eye(3)).T + dT[:3, 3], axis=1).max()
             if step < tolerance:
                 break
     return T

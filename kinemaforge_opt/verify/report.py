@@ -32,6 +32,14 @@ def _key(h: float) -> str:
     return f"{h:g}"
 
 
+def energy_text(residual: float | None, fmt: str = ".3g") -> str:
+    """An energy residual as printed: ``fmt`` digits, or why there is none (None or NaN: no stretch
+    of the motion is free of the joints' stops, so nothing could be booked)."""
+    if residual is None or not np.isfinite(residual):
+        return "n/a (no stretch of the motion free of the joints' stops to book)"
+    return format(residual, fmt)
+
+
 def verify_recording(
     model: ArticulatedModel,
     recording: Recording,
@@ -55,7 +63,7 @@ def verify_recording(
         "max_drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.max_drift_m)},
         "joint_rms": {_key(h): float(d) for h, d in zip(report.horizons_s, report.joint_rms)},
         "beyond_recording": {_key(h): bool(b) for h, b in zip(report.horizons_s, report.beyond_recording)},
-        "energy_residual": float(residual),
+        "energy_residual": None if np.isnan(residual) else float(residual),
         "plot": Path(plot_path).name,
         "timing_s": {"replay": report.simulated.wall_time_s, "total": time.perf_counter() - start},
     }

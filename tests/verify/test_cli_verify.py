@@ -55,3 +55,20 @@ def test_recording_joint_not_in_model_is_named(files, capsys):
     err = capsys.readouterr().err
     assert "'hinge'" in err and "slider" in err
     assert not (files / "o" / "verification.json").exists()
+
+
+def test_a_part_pressed_into_its_stop_throughout_has_no_energy_books(tmp_path, capsys):
+    """Every sample 2 mm into the stop (a compliant stop stores energy there): no stretch of the
+    motion is free of it, so the energy residual is null in the JSON and said to be unavailable
+    (and why) on the terminal, not a crash."""
+    import numpy as np
+
+    from kinemaforge_opt.model import JointLimits
+
+    write_urdf(slider(2.0, limits=JointLimits(0.0, 0.4)), tmp_path / "model.urdf")
+    t = np.arange(0.0, 2.0, 0.01)
+    write_recording(tmp_path / "rec.csv", Recording(t, ("x",), np.full((t.size, 1), -0.002), tau=np.full((t.size, 1), -1.0)))
+    assert main(["verify", str(tmp_path / "model.urdf"), str(tmp_path / "rec.csv"), "-o", str(tmp_path / "out"),
+                 "--horizons", "1"]) == 0
+    assert json.loads((tmp_path / "out" / "verification.json").read_text())["energy_residual"] is None
+    assert "energy residual n/a (no stretch of the motion free of the joints' stops to book)" in capsys.readouterr().out
