@@ -800,11 +800,13 @@ def _comoving(new: Proposal, proposals: list[Proposal], tolerance: float) -> tup
     None): ``new``'s points, carried from the anchor — the step both observe nearest ``new``'s
     reference — by that proposal's motion instead of their own, land within ``tolerance`` [m]
     (RMS) of their own track at COMOVING_SHARE of the steps both observe (a new track may fail at
-    a few steps where its piece is hidden)."""
+    a few steps where its piece is hidden).  The anchor alone is no evidence (both tracks put the
+    points where they are there): a proposal observed only at the new one's reference step would
+    swallow any part seeded at that step, and with it that part's track."""
     best, best_share, anchor = None, 0.0, None
     for k, p in enumerate(proposals):
         common, a = _common_anchor(new, p)
-        if a is None:
+        if a is None or common.size < 2:
             continue
         x = new.points @ new.Ts_delta[a][:3, :3].T + new.Ts_delta[a][:3, 3]  # new's points at a
         agree = 0

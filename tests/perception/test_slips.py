@@ -84,6 +84,20 @@ def test_a_part_reseeded_where_its_track_was_cut_rejoins_and_fills_the_gap():
     assert _comoving(still, [p], 0.01) == (None, None)
 
 
+def test_a_proposal_seen_only_at_the_new_ones_reference_does_not_swallow_it():
+    """A drawer pulled 3 cm per step, tracked from step 4 over all 8 steps, beside an earlier
+    proposal seeded at step 4 whose track failed everywhere else: the one step both observe is
+    the anchor, where any two tracks agree by construction, so the drawer is no piece of it (it
+    was joined into it, and its track was dropped with it: a pulled drawer lost)."""
+    truth = [_pose(t=(0.0, -0.03 * s, 0.0)) for s in range(8)]
+    drawer = Proposal("p1", 4, BOX @ truth[4][:3, :3].T + truth[4][:3, 3],
+                      np.stack([T @ np.linalg.inv(truth[4]) for T in truth]))
+    lost = np.full((8, 4, 4), np.nan)
+    lost[4] = np.eye(4)
+    failed = Proposal("p0", 4, drawer.points[:100] + [0.0, 0.0, 0.5], lost)
+    assert _comoving(drawer, [failed], 0.01) == (None, None)
+
+
 def test_a_lid_slammed_shut_is_no_slip():
     """A lid turning 15 degrees per step about its hinge, then 54 degrees in one step onto its
     base, where it stops: a speed change along the same screw."""
