@@ -189,7 +189,8 @@ def pixel_stride(voxel: float, foot: float) -> int:
 def downsample(points: np.ndarray, voxel: float, outliers: bool = False) -> np.ndarray:
     """(N, 3 + k) points [m] -> (M, 3 + k) centroids of the points in each occupied voxel of edge
     ``voxel`` [m], cells at integer multiples of the edge (what open3d's ``voxel_down_sample``
-    does up to its grid offset; in numpy, several times faster on a busy host); columns past the
+    does up to its grid offset; in numpy, several times faster on a busy host), in the order of
+    each voxel's first input point; columns past the
     third are per-point attributes, averaged over each voxel like the positions;
     with ``outliers``, centroids with fewer than OUTLIER_MIN_NEIGHBOURS others within
     OUTLIER_RADIUS_VOXELS voxels are dropped (isolated speckle)."""
@@ -203,9 +204,10 @@ def downsample(points: np.ndarray, voxel: float, outliers: bool = False) -> np.n
     # voxels in the order of their first input point, not of their keys: the keys' order follows
     # the world axes, and later stages subsample by index (every k-th point, seeded subsets), so a
     # key order would make them pick other points when the same scene comes in a rotated world
+    order = np.argsort(first)
     rank = np.empty_like(first)
-    rank[np.argsort(first, kind="stable")] = np.arange(first.size)
-    inv, count = rank[inv], count[np.argsort(first, kind="stable")]
+    rank[order] = np.arange(first.size)
+    inv, count = rank[inv], count[order]
     out = np.stack([np.bincount(inv, points[:, j], minlength=count.size) for j in range(points.shape[1])], axis=1) / count[:, None]
     if outliers and len(out) > OUTLIER_MIN_NEIGHBOURS:
         # a centroid is kept when its OUTLIER_MIN_NEIGHBOURS nearest others are all within the
