@@ -15,7 +15,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from ..errors import DataError
-from ..spatial import axis_angle_error
+from ..spatial import axis_angle_error, line_point_distance
 
 
 def axis_error_deg(axis_est, axis_true) -> float:
@@ -39,9 +39,7 @@ def origin_error_m(axis_est, origin_est, origin_true) -> float:
     a = np.asarray(axis_est, dtype=float)
     if a.shape != (3,) or np.linalg.norm(a) < 1e-12:
         raise DataError(f"origin error needs a non-zero 3-vector axis, got {a.tolist()}")
-    a = a / np.linalg.norm(a)
-    d = np.asarray(origin_true, dtype=float) - np.asarray(origin_est, dtype=float)
-    return float(np.linalg.norm(d - a * d.dot(a)))
+    return line_point_distance(a, origin_est, origin_true)
 
 
 @dataclass(frozen=True)

@@ -25,9 +25,15 @@ def tiny_case(tmp_path_factory):
     return generate_case(dataclasses.replace(get_case("tiny_door"), frames=10), root / "tiny_door")
 
 
-def test_nlp_results_reach_the_urdf_and_the_document(tiny_case, tmp_path):
-    out = tmp_path / "out"
-    rec = reconstruct_sequence(tiny_case.sequence, out, show_progress=False)
+@pytest.fixture(scope="module")
+def tiny_reconstruction(tiny_case, tmp_path_factory):
+    """(Reconstruction, its OUT folder) of the tiny door with the default options."""
+    out = tmp_path_factory.mktemp("tiny_out") / "out"
+    return reconstruct_sequence(tiny_case.sequence, out, show_progress=False), out
+
+
+def test_nlp_results_reach_the_urdf_and_the_document(tiny_reconstruction):
+    rec, out = tiny_reconstruction
     doc = json.loads((out / "reconstruction.json").read_text())
     nlp = doc["nlp"]
     assert nlp["enabled"] and isinstance(nlp["success"], bool) and nlp["iterations"] > 0
@@ -82,7 +88,8 @@ def _sequence_in_another_world(src, dst, T_new_old: np.ndarray):
     np.savetxt(dst / "wrenches.csv", w, delimiter=",", header=",".join(header), comments="")
 
 
-def test_the_same_scene_in_a_world_with_gravity_along_y_is_the_same_model_turned(tiny_case, tmp_path):
+def test_the_same_scene_in_a_world_with_gravity_along_y_is_the_same_model_turned(tiny_case, tiny_reconstruction,
+                                                                                  tmp_path):
     """The door recorded in a world whose axes are permuted (gravity along +y, as in a world that
     is an OpenCV camera's frame; the sequence says so in its ``gravity`` field) is the model of
     the z-up world turned with it: the same joint, its axis and origin moved by the rotation, the
@@ -93,16 +100,16 @@ def test_the_same_scene_in_a_world_with_gravity_along_y_is_the_same_model_turned
     T = np.eye(4)
     T[:3, :3] = R
     _sequence_in_another_world(tiny_case.sequence, tmp_path / "seq", T)
-    runs, drift = {}, {}
+    runs, outs, drift = {"z": tiny_reconstruction[0]}, {"z": tiny_reconstruction[1], "y": tmp_path / "y"}, {}
+    runs["y"] = reconstruct_sequence(tmp_path / "seq", outs["y"], show_progress=False)
     for world, seq in (("z", tiny_case.sequence), ("y", tmp_path / "seq")):
-        runs[world] = reconstruct_sequence(seq, tmp_path / world, show_progress=False)
-        verify_reconstruction(tmp_path / world, seq, reconstruction=runs[world], horizons_s=(1.0,))  # + tracks.csv
+        verify_reconstruction(outs[world], seq, reconstruction=runs[world], horizons_s=(1.0,))  # + tracks.csv
         # the replay of the model read back from OUT (the gravity its URDF holds)
-        drift[world] = verify_reconstruction(tmp_path / world, seq, horizons_s=(1.0,))["drift_m"]["1"]
+        drift[world] = verify_reconstruction(outs[world], seq, horizons_s=(1.0,))["drift_m"]["1"]
     gravity = np.array([0.0, 9.81, 0.0])
     np.testing.assert_allclose(R @ np.array([0.0, 0.0, -9.81]), gravity, atol=1e-12)
     np.testing.assert_allclose(runs["y"].model.gravity, gravity, atol=1e-12)
-    np.testing.assert_allclose(read_urdf(tmp_path / "y" / "model.urdf").gravity, gravity, atol=1e-12)
+    np.testing.assert_allclose(read_urdf(outs["y"] / "model.urdf").gravity, gravity, atol=1e-12)
     for jz, jy in zip(runs["z"].document["joints"], runs["y"].document["joints"], strict=True):
         assert (jz["type"], jz["parent"], jz["child"]) == (jy["type"], jy["parent"], jy["child"])
         axis = R @ np.asarray(jz["axis_world"])
