@@ -764,16 +764,66 @@ def absorb(p: Proposal, frag: Proposal, anchor: int, failed: list[int] = ()) -> 
     return Proposal(p.name, p.ref, _points_with(p, frag, anchor), Ts)
 
 
+def coincident_with(tracker: Tracker, q: Proposal, proposals: list[Proposal]) -> tuple[int | None, int | None]:
+    """(index of the proposal whose moved points ``q``'s cover, anchor step) or (None, None)
+    (module doc, duplicates): at COMOVING_SHARE of the steps both observe — themselves
+    COMOVING_SHARE of ``q``'s observed steps — at least COMOVING_SHARE of ``q``'s points lie
+    within the fine ICP radius of the other's; of several, the one covered at most steps."""
+    fine = ICP_FINE_VOXELS * tracker.voxel
+    x = tracking_subset(q.points)
+    best, best_share, anchor = None, 0.0, None
+    for k, p in enumerate(proposals):
+        if p is q:
+            continue
+        common, a = _common_anchor(q, p)
+        if common.size < max(COMOVING_SHARE * observed_steps(q), 2):
+            continue
+        covered = 0
+        for s in common:
+            T = q.Ts_delta[s]
+            on = cKDTree(p.points_at(int(s))).query(x @ T[:3, :3].T + T[:3, 3], distance_upper_bound=fine, workers=-1)[0] < np.inf
+            covered += on.mean() >= COMOVING_SHARE
+        share = covered / common.size
+        if share >= COMOVING_SHARE and share > best_share:
+            best, best_share, anchor = k, share, a
+    return best, anchor
+
+
+def union_fit(tracker: Tracker, p: Proposal, q: Proposal, by: Proposal, anchor: int) -> float:
+    """Mean :meth:`Tracker.fit`, over the steps ``p`` and ``q`` both observe, of both proposals'
+    points (their tracking subsets, taken at the ``anchor`` step) carried from there by ``by``'s
+    motion (one of the two)."""
+    x = np.concatenate([tracking_subset(r.points) @ r.Ts_delta[anchor][:3, :3].T + r.Ts_delta[anchor][:3, 3] for r in (p, q)])
+    common = _common_anchor(p, q)[0]
+    fits = []
+    for s in common:
+        D = by.Ts_delta[s] @ np.linalg.inv(by.Ts_delta[anchor])
+        fits.append(tracker.fit(x @ D[:3, :3].T + D[:3, 3], int(s)))
+    return float(np.mean(fits))
+
+
 def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
     """The proposals with every fragment absorbed into the part whose motion explains it
     (:func:`explained_by`), smallest proposal first (a part's large front is explained by no
-    fragment's lagging track)."""
+    fragment's lagging track); a proposal that no motion explains but whose points cover another
+    one's at its steps (:func:`coincident_with`) is the same part tracked twice: the two become
+    one, with the motion that puts both point sets on observed surfaces better
+    (:func:`union_fit`)."""
     out = list(proposals)
     for name in [p.name for p in sorted(proposals, key=lambda p: len(p.points))]:
-        frag = next(p for p in out if p.name == name)
+        frag = next((p for p in out if p.name == name), None)
+        if frag is None:  # merged into a smaller duplicate whose motion was kept
+            continue
         k, a, failed = explained_by(tracker, frag, out)
         if k is not None:
             out[k] = absorb(out[k], frag, a, failed)
+            out = [p for p in out if p is not frag]
+            continue
+        k, a = coincident_with(tracker, frag, out)
+        if k is not None:
+            other = out[k]
+            keep, drop = (other, frag) if union_fit(tracker, other, frag, other, a) >= union_fit(tracker, other, frag, frag, a) else (frag, other)
+            out[k] = absorb(keep, drop, a)
             out = [p for p in out if p is not frag]
     return out
 

@@ -15,8 +15,11 @@ with T_world_P(t), T_world_C(t) the representatives' poses (identity for the roo
     prismatic:           q(t) = (p_M(t) − p_M(s0)) · a_P                                        [m]
 
 with a_world the joint axis in the world at q = 0 (forward kinematics of the model).  Steps at
-which a joint's two tracks are not both observed are filled by linear interpolation in time (held
-at the ends) and reported.
+which a joint's two tracks are not both observed are filled by linear interpolation in time and
+reported.  The values span the steps from the first at which every joint is measured to the last:
+before and after, a value could only be held, and a held value is no measurement (a door whose
+track starts late, pushed open while it was near shut, held at its first tracked angle under the
+push's force, replayed 6.6 cm off within a second).
 
 A track's *orientation* can be off by a half-turn: registration fits a symmetric part (a door or
 lid slab, a drawer front) equally well turned over, and a tracker may switch between the fits.
@@ -195,7 +198,14 @@ def joint_values(model: ArticulatedModel, tracks: PoseTracks, link_tracks: Mappi
         q[:, i] = np.interp(np.arange(T), idx, qi)
         observed[idx, i] = True
     names = {link: (None if k is None else tracks.names[k]) for link, k in reps.items()}
-    return JointValues(tracks.times.copy(), model.joint_names, q, observed, s0, names)
+    # the measured span: before the first step at which every joint is measured (or after the
+    # last) a value would be held, not measured
+    every = np.flatnonzero(observed.all(axis=1))
+    first, last = (min(every[0], s0), max(every[-1], s0)) if every.size else (s0, s0)
+    if last - first < 1:
+        raise DataError(f"the joints {', '.join(model.joint_names)} are measured together at fewer than 2 time steps")
+    span = slice(first, last + 1)
+    return JointValues(tracks.times[span].copy(), model.joint_names, q[span], observed[span], s0 - first, names)
 
 
 POSITION_FLOOR_M = 1e-6

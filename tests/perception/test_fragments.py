@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from kinemaforge_opt.perception.track import Proposal, Tracker, absorb, explained_by, merge_fragments
+from kinemaforge_opt.perception.track import ICP_FINE_VOXELS, Proposal, Tracker, absorb, explained_by, merge_fragments
 
 STEPS = 16
 CARCASS = (np.array([-0.2, 0.0, 0.0]), np.array([0.2, 0.4, 0.6]))  # box [m]; drawers pull along -y
@@ -47,6 +47,7 @@ class _Oracle(Tracker):
 
     def __init__(self, surfaces: list[np.ndarray]):
         self.trees = [cKDTree(s) for s in surfaces]
+        self.voxel = ON_SURFACE / ICP_FINE_VOXELS  # the fine ICP radius: a point on a surface
 
     def verify(self, points, s):
         on = self.trees[s].query(points, distance_upper_bound=ON_SURFACE)[0] < np.inf

@@ -121,3 +121,21 @@ def test_errors_name_the_link_and_the_joint(door):
         joint_values(model, once, links)
     with pytest.raises(DataError, match="position-only"):
         joint_values(model, PoseTracks(tracks.times, tracks.names, tracks.positions), links)
+
+
+def test_values_span_only_the_steps_where_every_joint_is_measured(two_joints):
+    """The drawer's track starts at step 5 and ends at step 18 (hidden before and after): the values
+    span steps 5..18, where they are MuJoCo's q; a held value before or after would be no measurement."""
+    model, tracks, links, wrenches = _inputs(two_joints)
+    k = tracks.names.index("drawer")
+    P, R = tracks.positions.copy(), tracks.Rs_world_track.copy()
+    P[k, :5] = P[k, 19:] = np.nan
+    R[k, :5] = R[k, 19:] = np.nan
+    late = PoseTracks(tracks.times, tracks.names, P, R)
+    jr = joint_recording(model, late, links, wrenches)
+    np.testing.assert_array_equal(jr.recording.t, tracks.times[5:19])
+    assert jr.values.zero_step == 0 and jr.values.observed.all()
+    assert jr.forcing.t[0] == tracks.times[5]  # the replay starts at the first measured step
+    truth = read_recording(two_joints.recording)
+    q_true = np.column_stack([np.interp(jr.recording.t, truth.t, truth.q[:, j]) for j in range(model.nq)])
+    np.testing.assert_allclose(jr.recording.q, q_true - q_true[0], atol=1e-9)
