@@ -764,6 +764,21 @@ def absorb(p: Proposal, frag: Proposal, anchor: int, failed: list[int] = ()) -> 
     return Proposal(p.name, p.ref, _points_with(p, frag, anchor), Ts)
 
 
+def without_contradicted(tracker: Tracker, q: Proposal, by: Proposal, anchor: int) -> Proposal:
+    """``q`` less the points that ``by``'s motion, carried from the ``anchor`` step, puts where the
+    images saw through them at more than 1 − COMOVING_SHARE of the steps both observe (what a
+    duplicate's wrong track had grown into: no part of the part whose motion is kept)."""
+    common = _common_anchor(q, by)[0]
+    T = q.Ts_delta[anchor]
+    x = q.points @ T[:3, :3].T + T[:3, 3]
+    seen_through = np.zeros(len(x), dtype=int)
+    for s in common:
+        D = by.Ts_delta[s] @ np.linalg.inv(by.Ts_delta[anchor])
+        seen_through += tracker.verdicts(x @ D[:3, :3].T + D[:3, 3], int(s))[1]
+    keep = seen_through <= (1.0 - COMOVING_SHARE) * common.size
+    return Proposal(q.name, q.ref, q.points[keep], q.Ts_delta)
+
+
 def coincident_with(tracker: Tracker, q: Proposal, proposals: list[Proposal]) -> tuple[int | None, int | None]:
     """(index of the proposal whose moved points ``q``'s cover, anchor step) or (None, None)
     (module doc, duplicates): at COMOVING_SHARE of the steps both observe — themselves
@@ -808,7 +823,9 @@ def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposa
     fragment's lagging track); a proposal that no motion explains but whose points cover another
     one's at its steps (:func:`coincident_with`) is the same part tracked twice: the two become
     one, with the motion that puts both point sets on observed surfaces better
-    (:func:`union_fit`)."""
+    (:func:`union_fit`): the covering proposal as it is when its motion wins, else the covered
+    one with the covering one's points less those its motion puts in seen-through space
+    (:func:`without_contradicted`)."""
     out = list(proposals)
     for name in [p.name for p in sorted(proposals, key=lambda p: len(p.points))]:
         frag = next((p for p in out if p.name == name), None)
@@ -822,8 +839,11 @@ def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposa
         k, a = coincident_with(tracker, frag, out)
         if k is not None:
             other = out[k]
-            keep, drop = (other, frag) if union_fit(tracker, other, frag, other, a) >= union_fit(tracker, other, frag, frag, a) else (frag, other)
-            out[k] = absorb(keep, drop, a)
+            # kept: the covering proposal (the covered one's points lie on it, but for at most
+            # 1 - COMOVING_SHARE that nothing ties to the part); or, when the covered one's motion
+            # wins, that one with both point sets, less what its motion contradicts
+            if union_fit(tracker, other, frag, frag, a) > union_fit(tracker, other, frag, other, a):
+                out[k] = absorb(frag, without_contradicted(tracker, other, frag, a), a)
             out = [p for p in out if p is not frag]
     return out
 
