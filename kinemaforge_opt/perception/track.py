@@ -9,9 +9,9 @@ that stops).  From each, ICP runs — with only the points the images confirm at
 there are enough (a part's far side would pull it onto what lies behind) — a coarse pass (radius
 ICP_COARSE_VOXELS, and a *wide* one starting at WIDE_FACTOR times that: a part that starts,
 stops or changes speed between two samples lands outside the coarse basin of either guess) and a
-fine pass (radius ICP_FINE_VOXELS) from each coarse pose not within the fine radius of another
-(the two share a basin); point-to-point, as point-to-plane would let a flat part slide in its
-own plane; against the non-static fused points at s (static surfaces flush with a part, like a
+fine pass (radius ICP_FINE_VOXELS) from each coarse pose not within START_SEPARATION_VOXELS of
+another (a flat face's voxel grid puts a local minimum every voxel along it); point-to-point, as
+point-to-plane would let a flat part slide in its own plane; against the non-static fused points at s (static surfaces flush with a part, like a
 cabinet's front frame around a closed door, would let it slide) — a part at rest where it is
 static (a closed drawer's front) finds few correspondences and keeps its guess, which the images
 then confirm.  Each result is
@@ -107,6 +107,11 @@ ICP_ITERATIONS = 20
 # The coarse pass starts at this multiple of the coarse radius (a part starting to move between
 # two samples — a fridge door swinging 20° — lands far outside the coarse basin).
 WIDE_FACTOR = 3.0
+# Two ICP starts (guesses, coarse poses) nearer than this many voxels are one.  A voxelised flat
+# face has a local minimum every voxel along itself (its points sit on the grid): starts a voxel
+# apart can end a voxel apart, one of them the face slid along itself (a drawer front carried
+# sideways 5 mm a step by the constant-velocity guess, 42 mm over 8 steps).
+START_SEPARATION_VOXELS = 0.5
 # ICP stops when an iteration moves the points by less than this share of a voxel.
 ICP_TOLERANCE_VOXELS = 0.05
 # The coarse ICP pass uses every n-th point (it only has to reach the fine basin).
@@ -421,15 +426,15 @@ class Tracker:
         :meth:`redetect`."""
         if self.trees[s] is None or len(self.targets[s]) < 3:
             return None
-        fine = ICP_FINE_VOXELS * self.voxel
+        apart = START_SEPARATION_VOXELS * self.voxel
         starts: list[tuple[np.ndarray, np.ndarray]] = []  # (coarse pose, ICP source)
         for k, T0 in enumerate(guesses):
-            if any(displacement(T0, G, points) <= fine for G in guesses[:k]):
+            if any(displacement(T0, G, points) <= apart for G in guesses[:k]):
                 continue  # one start (a part at rest: constant velocity is no motion)
             source = self._confirmed(points, s, T0)
             for wide in (False, True):
                 T = self._coarse(source, s, T0, wide)
-                if all(displacement(T, U, points) > fine for U, _ in starts):
+                if all(displacement(T, U, points) > apart for U, _ in starts):
                     starts.append((T, source))
         found = []  # (pose, moved points, their verdicts) of the acceptable results
         for T0, source in starts:
