@@ -18,7 +18,8 @@ then confirm.  Each result is
 *verified* by the free-space tests of :mod:`change` against every depth image at s; it is
 acceptable when the points the images can judge are mostly consistent (:func:`acceptable`).  Of
 the acceptable results the one with the largest share of points confirmed *and* on an observed
-surface (within the fine radius of a fused point) less the share seen through is kept.  The
+surface (within the fine radius of a fused point) less the share seen through is kept (of
+results within FIT_TIE_SIGMAS of it, the first in the guesses' order).  The
 free-space test alone cannot rank them: it confirms a point anywhere within τ = 3√2·σ_z(z) of a
 reading (several cm at 2 m), ICP matches within 1.5 voxels — a drawer front pulled out 8 cm
 between two samples, which the coarse pass from rest leaves short and tilted 44° about its long
@@ -112,6 +113,12 @@ WIDE_FACTOR = 3.0
 # apart can end a voxel apart, one of them the face slid along itself (a drawer front carried
 # sideways 5 mm a step by the constant-velocity guess, 42 mm over 8 steps).
 START_SEPARATION_VOXELS = 0.5
+# Of the acceptable ICP results, those whose fit (Tracker.fit) lies within this many binomial
+# standard deviations, sqrt(f(1 - f)/N) for N points, of the best one are ties the images cannot
+# break, and the first in the guesses' order (constant velocity first) is kept: the motion goes on
+# unless the images say otherwise.  A shut drawer's front, flush with its frame and hidden, fits
+# about equally a voxel to either side; taking the best of equal fits let it wander ±1 cm at rest.
+FIT_TIE_SIGMAS = 2.0
 # ICP stops when an iteration moves the points by less than this share of a voxel.
 ICP_TOLERANCE_VOXELS = 0.05
 # The coarse ICP pass uses every n-th point (it only has to reach the fine basin).
@@ -447,7 +454,11 @@ class Tracker:
             return self.redetect(points, s, guesses[0])
         if len(found) == 1:
             return found[0][0]
-        return max(found, key=lambda f: self.fit(f[1], s, f[2]))[0]
+        # of the fits within FIT_TIE_SIGMAS of the best, the first in the guesses' order
+        fits = np.array([self.fit(f[1], s, f[2]) for f in found])
+        best = float(fits.max())
+        tie = FIT_TIE_SIGMAS * np.sqrt(max(best * (1.0 - best), 0.0) / len(points))
+        return next(f[0] for f, x in zip(found, fits) if x >= best - tie)
 
     def redetect(self, points: np.ndarray, s: int, prediction: np.ndarray) -> np.ndarray | None:
         """Principal-axes alignments of (N, 3) reference points onto the moving clusters at step
