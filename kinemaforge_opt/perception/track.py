@@ -11,8 +11,9 @@ ICP_COARSE_VOXELS, and a *wide* one starting at WIDE_FACTOR times that: a part t
 stops or changes speed between two samples lands outside the coarse basin of either guess) and a
 fine pass (radius ICP_FINE_VOXELS) from each coarse pose not within START_SEPARATION_VOXELS of
 another (a flat face's voxel grid puts a local minimum every voxel along it); point-to-point, as
-point-to-plane would let a flat part slide in its own plane; against the non-static fused points at s (static surfaces flush with a part, like a
-cabinet's front frame around a closed door, would let it slide) — a part at rest where it is
+point-to-plane would let a flat part slide in its own plane; against the non-static fused points
+at s (static surfaces flush with a part, like a cabinet's front frame around a closed door, would
+let it slide) — a part at rest where it is
 static (a closed drawer's front) finds few correspondences and keeps its guess, which the images
 then confirm.  Each result is
 *verified* by the free-space tests of :mod:`change` against every depth image at s; it is
@@ -84,6 +85,13 @@ motion is the simpler explanation when the images cannot tell the two motions ap
 proposal's points join that part (:func:`absorb`); of several parts the one whose motion the
 images confirm most is taken.  A second drawer moving at other times puts the points in the air
 in front of the body (seen through) and is no explanation.
+
+Duplicates: a part can be tracked twice, once truly and once by a piece sliding along it (a flat
+door), whose grown points the true motion puts partly in seen-through space, so neither explains
+the other.  Two rigid parts cannot cover the same surface at every step: a proposal no motion
+explains whose points lie on another one's (COMOVING_SHARE of them within the fine ICP radius, at
+COMOVING_SHARE of the steps both observe) is the same part (:func:`coincident_with`), and the
+motion that puts both point sets on observed surfaces better (:func:`union_fit`) is kept.
 """
 
 from __future__ import annotations

@@ -89,7 +89,7 @@ FORCE_EPS_N = 1e-9
 class JointValues:
     """Joint values measured from pose tracks.
 
-    t: (T,) the tracks' times [s].  joint_names: the model's movable joints (q order).
+    t: (T,) the tracks' times over the measured span (module docs) [s].  joint_names: the model's movable joints (q order).
     q: (T, n) joint values [rad or m], q = 0 at the zero step.  observed: (T, n) bool, False
     where the value was filled by interpolation.  zero_step: index of s0.
     representatives: link name -> the track that follows it (None for the root)."""
@@ -340,7 +340,7 @@ def joint_recording(
     clouds_world: Mapping[str, np.ndarray] | None = None,
 ) -> JointRecording:
     """The joint-space recording of a reconstruction (module docs): q from ``tracks`` and, when
-    ``wrenches`` are given, τ from them; times start where the tracks start."""
+    ``wrenches`` are given, τ from them; times span the steps where every joint is measured."""
     values = joint_values(model, tracks, link_tracks)
     if wrenches is None:
         rec = Recording(values.t, values.joint_names, values.q)

@@ -139,3 +139,16 @@ def test_values_span_only_the_steps_where_every_joint_is_measured(two_joints):
     truth = read_recording(two_joints.recording)
     q_true = np.column_stack([np.interp(jr.recording.t, truth.t, truth.q[:, j]) for j in range(model.nq)])
     np.testing.assert_allclose(jr.recording.q, q_true - q_true[0], atol=1e-9)
+
+
+def test_joints_measured_together_at_one_step_only_is_a_named_error(two_joints):
+    model, tracks, links, _ = _inputs(two_joints)
+    P, R = tracks.positions.copy(), tracks.Rs_world_track.copy()
+    for name, seen in (("door", slice(0, 2)), ("drawer", slice(1, 3))):
+        k = tracks.names.index(name)
+        hide = np.ones(tracks.times.size, dtype=bool)
+        hide[seen] = False
+        P[k, hide] = np.nan
+        R[k, hide] = np.nan
+    with pytest.raises(DataError, match="door_joint, drawer_joint are measured together at fewer than 2 time steps"):
+        joint_values(model, PoseTracks(tracks.times, tracks.names, P, R), links)
