@@ -103,6 +103,7 @@ from scipy.spatial import cKDTree
 
 from ..io.sequence import CameraInfo
 from ..parallel import thread_map
+from ..spatial import transform_points
 from .change import MOVING, STATIC, free_space_test, padded_depth
 from .clouds import DepthNoise, TimeCloud, downsample
 from .segment import CLUSTER_VOXELS, Plane, clusters
@@ -714,6 +715,11 @@ def _common_anchor(p: Proposal, q: Proposal) -> tuple[np.ndarray, int | None]:
     return common, (int(common[np.argmin(np.abs(common - p.ref))]) if common.size else None)
 
 
+def carried(by: Proposal, anchor: int, s: int, points: np.ndarray) -> np.ndarray:
+    """(N, 3) world points at step ``anchor`` carried by ``by``'s motion to step ``s``."""
+    return transform_points(by.Ts_delta[s] @ np.linalg.inv(by.Ts_delta[anchor]), points)
+
+
 def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
             steps: np.ndarray) -> tuple[float, list[int]] | None:
     """(mean share of (N, 3) world points at step ``anchor``, carried by ``by``'s motion to each
@@ -727,8 +733,7 @@ def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
     total, failed = 0.0, []
     own = tracking_subset(by.points)
     for s in steps:
-        D = by.Ts_delta[s] @ np.linalg.inv(by.Ts_delta[anchor])
-        cons, viol = tracker.verify(points @ D[:3, :3].T + D[:3, 3], int(s))
+        cons, viol = tracker.verify(carried(by, anchor, s, points), int(s))
         if viol > MAX_VIOLATED_SHARE or cons < MIN_CONSISTENT_SHARE * (cons + viol):
             T = by.Ts_delta[s]
             if acceptable(*tracker.verify(own @ T[:3, :3].T + T[:3, 3], int(s))):
@@ -776,12 +781,10 @@ def without_contradicted(tracker: Tracker, q: Proposal, by: Proposal, anchor: in
     images saw through them at more than 1 − COMOVING_SHARE of the steps both observe (what a
     duplicate's wrong track had grown into: no part of the part whose motion is kept)."""
     common = _common_anchor(q, by)[0]
-    T = q.Ts_delta[anchor]
-    x = q.points @ T[:3, :3].T + T[:3, 3]
+    x = q.points_at(anchor)
     seen_through = np.zeros(len(x), dtype=int)
     for s in common:
-        D = by.Ts_delta[s] @ np.linalg.inv(by.Ts_delta[anchor])
-        seen_through += tracker.verdicts(x @ D[:3, :3].T + D[:3, 3], int(s))[1]
+        seen_through += tracker.verdicts(carried(by, anchor, s, x), int(s))[1]
     keep = seen_through <= (1.0 - COMOVING_SHARE) * common.size
     return Proposal(q.name, q.ref, q.points[keep], q.Ts_delta)
 
@@ -802,8 +805,8 @@ def coincident_with(tracker: Tracker, q: Proposal, proposals: list[Proposal]) ->
             continue
         covered = 0
         for s in common:
-            T = q.Ts_delta[s]
-            on = cKDTree(p.points_at(int(s))).query(x @ T[:3, :3].T + T[:3, 3], distance_upper_bound=fine, workers=-1)[0] < np.inf
+            moved = transform_points(q.Ts_delta[s], x)
+            on = cKDTree(p.points_at(int(s))).query(moved, distance_upper_bound=fine, workers=-1)[0] < np.inf
             covered += on.mean() >= COMOVING_SHARE
         share = covered / common.size
         if share >= COMOVING_SHARE and share > best_share:
@@ -815,13 +818,8 @@ def union_fit(tracker: Tracker, p: Proposal, q: Proposal, by: Proposal, anchor: 
     """Mean :meth:`Tracker.fit`, over the steps ``p`` and ``q`` both observe, of both proposals'
     points (their tracking subsets, taken at the ``anchor`` step) carried from there by ``by``'s
     motion (one of the two)."""
-    x = np.concatenate([tracking_subset(r.points) @ r.Ts_delta[anchor][:3, :3].T + r.Ts_delta[anchor][:3, 3] for r in (p, q)])
-    common = _common_anchor(p, q)[0]
-    fits = []
-    for s in common:
-        D = by.Ts_delta[s] @ np.linalg.inv(by.Ts_delta[anchor])
-        fits.append(tracker.fit(x @ D[:3, :3].T + D[:3, 3], int(s)))
-    return float(np.mean(fits))
+    x = np.concatenate([transform_points(r.Ts_delta[anchor], tracking_subset(r.points)) for r in (p, q)])
+    return float(np.mean([tracker.fit(carried(by, anchor, s, x), int(s)) for s in _common_anchor(p, q)[0]]))
 
 
 def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:

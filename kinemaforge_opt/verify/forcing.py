@@ -89,7 +89,8 @@ FORCE_EPS_N = 1e-9
 class JointValues:
     """Joint values measured from pose tracks.
 
-    t: (T,) the tracks' times over the measured span (module docs) [s].  joint_names: the model's movable joints (q order).
+    t: (T,) the tracks' times over the measured span (module docs) [s].  joint_names: the
+    model's movable joints (q order).
     q: (T, n) joint values [rad or m], q = 0 at the zero step.  observed: (T, n) bool, False
     where the value was filled by interpolation.  zero_step: index of s0.
     representatives: link name -> the track that follows it (None for the root)."""
