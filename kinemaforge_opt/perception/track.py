@@ -9,16 +9,18 @@ that stops).  From each, ICP runs — with only the points the images confirm at
 there are enough (a part's far side would pull it onto what lies behind) — a coarse pass (radius
 ICP_COARSE_VOXELS, and a *wide* one starting at WIDE_FACTOR times that: a part that starts,
 stops or changes speed between two samples lands outside the coarse basin of either guess) and a
-fine pass (radius ICP_FINE_VOXELS) from each coarse pose not within the fine radius of another
-(the two share a basin); point-to-point, as point-to-plane would let a flat part slide in its
-own plane; against the non-static fused points at s (static surfaces flush with a part, like a
-cabinet's front frame around a closed door, would let it slide) — a part at rest where it is
+fine pass (radius ICP_FINE_VOXELS) from each coarse pose not within START_SEPARATION_VOXELS of
+another (a flat face's voxel grid puts a local minimum every voxel along it); point-to-point, as
+point-to-plane would let a flat part slide in its own plane; against the non-static fused points
+at s (static surfaces flush with a part, like a cabinet's front frame around a closed door, would
+let it slide) — a part at rest where it is
 static (a closed drawer's front) finds few correspondences and keeps its guess, which the images
 then confirm.  Each result is
 *verified* by the free-space tests of :mod:`change` against every depth image at s; it is
 acceptable when the points the images can judge are mostly consistent (:func:`acceptable`).  Of
 the acceptable results the one with the largest share of points confirmed *and* on an observed
-surface (within the fine radius of a fused point) less the share seen through is kept.  The
+surface (within the fine radius of a fused point) less the share seen through is kept (of
+results within FIT_TIE_SIGMAS of it, the first in the guesses' order).  The
 free-space test alone cannot rank them: it confirms a point anywhere within τ = 3√2·σ_z(z) of a
 reading (several cm at 2 m), ICP matches within 1.5 voxels — a drawer front pulled out 8 cm
 between two samples, which the coarse pass from rest leaves short and tilted 44° about its long
@@ -115,6 +117,17 @@ ICP_ITERATIONS = 20
 # The coarse pass starts at this multiple of the coarse radius (a part starting to move between
 # two samples — a fridge door swinging 20° — lands far outside the coarse basin).
 WIDE_FACTOR = 3.0
+# Two ICP starts (guesses, coarse poses) nearer than this many voxels are one.  A voxelised flat
+# face has a local minimum every voxel along itself (its points sit on the grid): starts a voxel
+# apart can end a voxel apart, one of them the face slid along itself (a drawer front carried
+# sideways 5 mm a step by the constant-velocity guess, 42 mm over 8 steps).
+START_SEPARATION_VOXELS = 0.5
+# Of the acceptable ICP results, those whose fit (Tracker.fit) lies within this many binomial
+# standard deviations, sqrt(f(1 - f)/N) for N points, of the best one are ties the images cannot
+# break, and the first in the guesses' order (constant velocity first) is kept: the motion goes on
+# unless the images say otherwise.  A shut drawer's front, flush with its frame and hidden, fits
+# about equally a voxel to either side; taking the best of equal fits let it wander ±1 cm at rest.
+FIT_TIE_SIGMAS = 2.0
 # ICP stops when an iteration moves the points by less than this share of a voxel.
 ICP_TOLERANCE_VOXELS = 0.05
 # The coarse ICP pass uses every n-th point (it only has to reach the fine basin).
@@ -429,15 +442,15 @@ class Tracker:
         :meth:`redetect`."""
         if self.trees[s] is None or len(self.targets[s]) < 3:
             return None
-        fine = ICP_FINE_VOXELS * self.voxel
+        apart = START_SEPARATION_VOXELS * self.voxel
         starts: list[tuple[np.ndarray, np.ndarray]] = []  # (coarse pose, ICP source)
         for k, T0 in enumerate(guesses):
-            if any(displacement(T0, G, points) <= fine for G in guesses[:k]):
+            if any(displacement(T0, G, points) <= apart for G in guesses[:k]):
                 continue  # one start (a part at rest: constant velocity is no motion)
             source = self._confirmed(points, s, T0)
             for wide in (False, True):
                 T = self._coarse(source, s, T0, wide)
-                if all(displacement(T, U, points) > fine for U, _ in starts):
+                if all(displacement(T, U, points) > apart for U, _ in starts):
                     starts.append((T, source))
         found = []  # (pose, moved points, their verdicts) of the acceptable results
         for T0, source in starts:
@@ -450,7 +463,11 @@ class Tracker:
             return self.redetect(points, s, guesses[0])
         if len(found) == 1:
             return found[0][0]
-        return max(found, key=lambda f: self.fit(f[1], s, f[2]))[0]
+        # of the fits within FIT_TIE_SIGMAS of the best, the first in the guesses' order
+        fits = np.array([self.fit(f[1], s, f[2]) for f in found])
+        best = float(fits.max())
+        tie = FIT_TIE_SIGMAS * np.sqrt(max(best * (1.0 - best), 0.0) / len(points))
+        return next(f[0] for f, x in zip(found, fits) if x >= best - tie)
 
     def redetect(self, points: np.ndarray, s: int, prediction: np.ndarray) -> np.ndarray | None:
         """Principal-axes alignments of (N, 3) reference points onto the moving clusters at step
