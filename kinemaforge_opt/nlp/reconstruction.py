@@ -259,12 +259,30 @@ class ScrewState:
 
 
 @dataclass(frozen=True, eq=False)
+class Normalisation:
+    """What a dense problem's terms are scaled by, taken from the state it is built around.
+    v_s, a_s: (n,) per-joint RMS speed and acceleration of the start's motion [rad/s or m/s, /s²]
+    (defect rows and the friction variables are in these units).  dyn_mask: (G − 1,) 1 where an
+    interval's defect counts (0 in a stop span), or None without dynamics.  e_scale: the energy
+    residual's scale [J], or None without the energy term.  A continuation (a stopped solve
+    resumed from its last iterate) is built with the stopped problem's own, so that it resumes
+    the same problem: rebuilt from the iterate, the scales and the stop spans moved with it
+    (a gravity-aligned door's objective went from 0.027 to 0.97 between the two solves)."""
+
+    v_s: np.ndarray
+    a_s: np.ndarray
+    dyn_mask: np.ndarray | None = None
+    e_scale: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
 class ScrewProblem:
     """A built (not solved) screw NLP: ``problem`` plus what reading its solution needs.
     frame_cols: (T,) grid column of each observed time step.  dynamics: the bridge functions.
     n_vis: number of weighted visual residuals (the objective's normaliser).  hess_lag: the
     assembled Lagrangian Hessian (or None).  prior: the ratio prior as a Function of the parameter
-    variables (every variable but the states, declaration order), or None."""
+    variables (every variable but the states, declaration order), or None.  normalisation: the
+    scales of its terms (:class:`Normalisation`)."""
 
     problem: Problem
     data: ScrewData
@@ -278,6 +296,7 @@ class ScrewProblem:
     hess_lag: ca.Function | None = None
     prior: ca.Function | None = None
     defects: ca.Function | None = None
+    normalisation: Normalisation | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -711,14 +730,36 @@ def stop_free(times: np.ndarray, q: np.ndarray, t_grid: np.ndarray) -> np.ndarra
     return free
 
 
+def seen_free(data: ScrewData, t_grid: np.ndarray) -> np.ndarray:
+    """(G − 1,) 1.0 for each interval of ``t_grid`` (G,) [s] between the first and the last
+    observed step at which every moving part is seen, else 0.0 (an interval is in when its
+    midpoint is; all 1.0 when fewer than two steps see every part).  Before a part is first seen
+    nothing but the dynamics places it: with the initial state free they swung the tiny door
+    0.5 rad open before the first frame that saw it shut, and the fit crawled for 400 iterations
+    trading that swing against the door's mass."""
+    seen = np.ones(data.times.size, dtype=bool)
+    for obs in data.observed.values():
+        seen &= np.array([_rows(pts) > 0 for pts in obs])
+    steps = np.flatnonzero(seen)
+    free = np.ones(t_grid.size - 1)
+    if steps.size < 2:
+        return free
+    mid = (t_grid[:-1] + t_grid[1:]) / 2
+    free[(mid < data.times[steps[0]]) | (mid > data.times[steps[-1]])] = 0.0
+    return free
+
+
 def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewState,
                         corr: dict[str, list[Correspondences]] | None, dense: bool,
-                        held: frozenset[str] = frozenset(), aligned: dict[str, np.ndarray] | None = None) -> ScrewProblem:
+                        held: frozenset[str] = frozenset(), aligned: dict[str, np.ndarray] | None = None,
+                        normalisation: Normalisation | None = None) -> ScrewProblem:
     """Build the NLP around ``state`` with fixed correspondences ``corr`` (see module doc).
     ``dense``: states (q, v) on the collocation grid with the dynamics/energy terms as the options
     say; else q on the frame grid and only ``vis``.  ``held``: damping / Coulomb variables
     ("damping:<joint>") held at the state's value instead of fitted.  ``aligned``: joint name ->
-    (k, 3) rows C of the linear constraint ``aligned:<joint>`` C · axis = 0 (:mod:`.gravity_aligned`)."""
+    (k, 3) rows C of the linear constraint ``aligned:<joint>`` C · axis = 0 (:mod:`.gravity_aligned`).
+    ``normalisation``: the scales of the terms (a continuation's: those of the solve it resumes),
+    else taken from ``state``."""
     model = data.model
     n = model.nq
     joints = model.movable_joints
@@ -755,6 +796,8 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         v0 = None
     cols_state = np.searchsorted(state.t, data.times)
     spline, v_s, a_s = _rates(data.times, state.q[cols_state])
+    if normalisation is not None:
+        v_s, a_s = normalisation.v_s, normalisation.a_s
     if use_dyn and v0 is None:
         v0 = spline(t_grid, 1)
 
@@ -805,13 +848,18 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
     G = t_grid.size
     if use_dyn:
         # interval k: grid k -> k + 1
-        dyn_mask = stop_free(data.times, state.q[cols_state], t_grid) if options.stop_impacts else np.ones(G - 1)
-        if not dyn_mask.any():
-            dyn_mask[:] = 1.0  # an impact at the first frame: nothing would be left
+        if normalisation is not None and normalisation.dyn_mask is not None:
+            dyn_mask = normalisation.dyn_mask.copy()
+        else:
+            seen = seen_free(data, t_grid)
+            dyn_mask = seen * (stop_free(data.times, state.q[cols_state], t_grid) if options.stop_impacts else 1.0)
+            if not dyn_mask.any():
+                dyn_mask = seen  # an impact at the first frame: nothing would be left
         lower, upper = np.full((2 * n, G), -np.inf), np.full((2 * n, G), np.inf)
         if not options.vis:  # nothing observes q: hold the observed steps at the current values
             lower[:n, frame_cols] = upper[:n, frame_cols] = q0.T[:, frame_cols]
-        # in a stop span no term sees v, nor q between frames: hold them (IPOPT drops them)
+        # in a stop span or before the parts are seen no term sees v, nor q between frames or at
+        # a frame that sees no part: hold them (IPOPT drops them)
         after = np.ones(G, dtype=bool)  # column c: no free interval (c - 1 or c) touches it
         after[1:] &= dyn_mask == 0
         after[:-1] &= dyn_mask == 0
@@ -819,7 +867,8 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         fixed_states = np.zeros((2 * n, G), dtype=bool)
         fixed_states[n:, after] = True
         between = after.copy()
-        between[frame_cols] = False
+        seen_frames = [any(_rows(obs[i]) > 0 for obs in data.observed.values()) for i in range(frame_cols.size)]
+        between[frame_cols[seen_frames]] = False
         fixed_states[:n, between] = True
         lower[fixed_states] = upper[fixed_states] = x_init[fixed_states]
         X = prob.variable("x", (2 * n, G), init=np.vstack([q0.T, v0.T]), lower=lower, upper=upper)
@@ -930,7 +979,8 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             E = energy.map(len(edges))(X[:, edges], theta_mx)  # ΔE telescopes: only window edges
             resid = ca.vertcat(*[E[i + 1] - E[i] - ca.sum2(Wk[:, a:b]) for i, (a, b) in enumerate(zip(edges[:-1], edges[1:]))])
             e_mask = np.array([float(dyn_mask[a:b].all()) for a, b in zip(edges[:-1], edges[1:])])
-            e_scale = _energy_scale(model, dyn, q0, v0)
+            e_scale = (normalisation.e_scale if normalisation is not None and normalisation.e_scale is not None
+                       else _energy_scale(model, dyn, q0, v0))
             rel = resid / e_scale
             if options.energy == "soft":
                 terms["energy"] = ca.sumsqr(rel * ca.DM(e_mask) / options.energy_sigma) * options.energy_weight
@@ -968,8 +1018,9 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             options.energy_weight / options.energy_sigma**2,
             [(f"axis:{j.name}", f"unit_axis:{j.name}") for j in joints], options.hessian == "gauss_newton",
             dyn_mask=dyn_mask, energy_mask=e_mask if use_energy else None, prior=prior_fn))
+    scales = Normalisation(v_s, a_s, dyn_mask if use_dyn else None, e_scale if use_energy else None)
     return ScrewProblem(prob, data, options, new_state, frame_cols, dyn, tuple(free), use_dyn, n_vis, hess_lag, prior_fn,
-                        defects)
+                        defects, scales)
 
 
 def _prior_residuals(prob: Problem, ratios: list[str], sigma: float) -> list:
@@ -1059,6 +1110,13 @@ def _solver_options(options: ScrewOptions, dense: bool, hess_lag: ca.Function | 
         # iterations); the monotone barrier update crawled there: protocol_cabinet_0 101
         # iterations -> 26 adaptive, the hard-energy test door 200 (not converged) -> 79
         out["ipopt.mu_strategy"] = "adaptive"
+        # IPOPT's filter takes any step that lowers the constraint violation while that is above
+        # theta_min (default 1e-4 here), whatever it does to the objective; the unit-axis
+        # constraints' curvature leaves ~1e-4 after each step, so steps that cut it were taken
+        # while the objective went 0.2 -> 1600 (the tiny door's full stage, 3 × 200 iterations).
+        # Below 1e-2 the iterate counts as feasible and every step must lower the objective
+        # (Armijo): that stage converges in 114.
+        out["ipopt.theta_min_fact"] = 1e-2
     if hess_lag is not None:  # the structured Hessian: the MX graph's own derivatives are cheap
         out["hess_lag"] = hess_lag
     elif dense and options.expand and not options.jit:
@@ -1092,8 +1150,7 @@ def read_solution(sp: ScrewProblem, result: Result) -> ScrewState:
         q, v = vals["q"].T, None
     # damping / coulomb are scaled variables: recover physical values from the built expression
     if any(name.startswith(FRICTION_PARAMETERS) for name in vals):
-        cols = np.searchsorted(st.t, sp.data.times)
-        spline, v_s, a_s = _rates(sp.data.times, st.q[cols])
+        v_s, a_s = sp.normalisation.v_s, sp.normalisation.a_s
         for k, j in enumerate(joints):
             fs = _force_scale(sp.data, j, v_s[k], a_s[k])
             # IPOPT may relax the bound 0 by ~1e-8: clip
@@ -1213,16 +1270,18 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     opts = dataclasses.replace(options, dyn=want_dense)
 
     def run(name, corr, dense, held=frozenset(), converged_only=False, start=None, aligned=None, accept=None,
-            stage_options=None, warm=None, commit=True, ipopt=None):
+            stage_options=None, warm=None, commit=True, ipopt=None, resumes=None):
         """Solve a stage from ``start`` (default: the current state) with ``stage_options``
         (default: the current ones); ``accept``: a test of a converged result that must also
-        pass; ``warm``: the stopped result whose last iterate ``start`` is (IPOPT warm start);
+        pass; ``warm``: the stopped result whose last iterate ``start`` is (IPOPT warm start), with
+        ``resumes`` its problem (whose :class:`Normalisation` the continuation keeps);
         ``commit``: an accepted result becomes the current state; ``ipopt``: IPOPT options on top
         of :func:`_solver_options`.  Returns (problem, result, the accepted solution or else the
         unaccepted last iterate or None)."""
         nonlocal state
         t0 = time.perf_counter()
-        sp = build_screw_problem(data, stage_options or opts, start or state, corr, dense, held, aligned)
+        sp = build_screw_problem(data, stage_options or opts, start or state, corr, dense, held, aligned,
+                                 None if resumes is None else resumes.normalisation)
         res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, warm=warm,
                                options={**_solver_options(options, sp.use_dyn, sp.hess_lag), **(ipopt or {})})
         accepted, iterate = False, None
@@ -1250,7 +1309,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         before with :data:`RESTART_IPOPT`."""
         sp, res, iterate = run(name, corr, True, held, converged_only, ipopt=ipopt)
         if iterate is not None and not stages[-1]["accepted"] and not res.success and not converged_only:
-            sp, res, _ = run(f"{name}_continued", corr, True, held, start=iterate, warm=res)
+            sp, res, _ = run(f"{name}_continued", corr, True, held, start=iterate, warm=res, resumes=sp)
             if not stages[-1]["accepted"]:
                 sp, res, _ = run(f"{name}_restarted", corr, True, held, ipopt=RESTART_IPOPT)
         return sp, res
@@ -1407,7 +1466,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             if not res_al.success and iterate is not None:
                 # stopped at max_iter: continued once, warm, as the dense stages are (run_dense)
                 sp_al, res_al, _ = run("gravity_aligned_continued", corr_al, sp.use_dyn, held, converged_only=True,
-                                       start=iterate, aligned=rows, accept=accept, stage_options=sp.options, warm=res_al)
+                                       start=iterate, aligned=rows, accept=accept, stage_options=sp.options, warm=res_al,
+                                       resumes=sp_al)
             ok = stages[-1]["accepted"]
             tested = "axes: " + ", ".join(f"{name} {kind}" for name, (kind, _) in hypotheses.items())
             if res_al.success:
