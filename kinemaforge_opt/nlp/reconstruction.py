@@ -1117,6 +1117,11 @@ def _solver_options(options: ScrewOptions, dense: bool, hess_lag: ca.Function | 
         # Below 1e-2 the iterate counts as feasible and every step must lower the objective
         # (Armijo): that stage converges in 114.
         out["ipopt.theta_min_fact"] = 1e-2
+        # the adaptive barrier may raise mu (to 20 at protocol_cabinet_0's second iteration): the
+        # barrier then pushed the variables bounded at 0 (damping, Coulomb) 1e4 units out, the
+        # objective went 0.18 -> 435 and the stage stopped at 2 × 200 iterations.  Capped at the
+        # restart's mu (RESTART_IPOPT) it converges in 29.
+        out["ipopt.mu_max"] = 1e-2
     if hess_lag is not None:  # the structured Hessian: the MX graph's own derivatives are cheap
         out["hess_lag"] = hess_lag
     elif dense and options.expand and not options.jit:
