@@ -22,7 +22,9 @@ Named costs (each reported at the optimum; any can be switched off):
   (the same transcription as :mod:`.joint_space`), each row divided by h × its typical rate
   and by ``dyn_sigma``, under a pseudo-Huber loss (robust to unmodelled contacts);
   τ_applied = Jᵀ W maps the recorded force (wrenches.csv: force f at world point p, on the link it
-  grips) to joint forces through the joint screws of the current model;
+  grips) to joint forces through the joint screws of the current model; only between the first
+  and the last step at which every moving part is seen (:func:`seen_free`) and outside the stop
+  spans (:func:`stop_spans`);
 - ``energy`` (the seed's Eq. 5): per window, ΔE − ∫ (τ_applied + τ_passive)·v dt relative to the
   energy scale of the motion; ``soft`` (a cost, divided by ``energy_sigma``) or ``hard`` (the
   constraint |·| ≤ ``energy_tolerance``).
