@@ -265,11 +265,12 @@ class Normalisation:
     """What a dense problem's terms are scaled by, taken from the state it is built around.
     v_s, a_s: (n,) per-joint RMS speed and acceleration of the start's motion [rad/s or m/s, /s²]
     (defect rows and the friction variables are in these units).  dyn_mask: (G − 1,) 1 where an
-    interval's defect counts (0 in a stop span), or None without dynamics.  e_scale: the energy
-    residual's scale [J], or None without the energy term.  A continuation (a stopped solve
-    resumed from its last iterate) is built with the stopped problem's own, so that it resumes
-    the same problem: rebuilt from the iterate, the scales and the stop spans moved with it
-    (a gravity-aligned door's objective went from 0.027 to 0.97 between the two solves)."""
+    interval's defect counts (0 in a stop span or outside the seen span, :func:`seen_free`), or
+    None without dynamics.  e_scale: the energy residual's scale [J], or None without the energy
+    term.  A continuation (a stopped solve resumed from its last iterate) is built with the
+    stopped problem's own, so that it resumes the same problem: rebuilt from the iterate, the
+    scales and the stop spans moved with it (a gravity-aligned door's objective went from 0.027
+    to 0.97 between the two solves)."""
 
     v_s: np.ndarray
     a_s: np.ndarray
