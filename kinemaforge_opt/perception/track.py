@@ -176,7 +176,7 @@ class Proposal:
         T = self.Ts_delta[s]
         if not np.all(np.isfinite(T)):
             return None
-        return self.points @ T[:3, :3].T + T[:3, 3]
+        return transform_points(T, self.points)
 
 
 def acceptable(consistent: float, violated: float) -> bool:
@@ -333,7 +333,7 @@ def icp(source: np.ndarray, tree: cKDTree, target: np.ndarray, T0: np.ndarray, r
     T = np.array(T0, dtype=float)
     for r in radii:
         for _ in range(iterations):
-            moved = source @ T[:3, :3].T + T[:3, 3]
+            moved = transform_points(T, source)
             d, idx = tree.query(moved, distance_upper_bound=r)
             ok = d < r
             if ok.sum() < 6:
@@ -455,7 +455,7 @@ class Tracker:
         found = []  # (pose, moved points, their verdicts) of the acceptable results
         for T0, source in starts:
             T = self._fine(source, s, T0)
-            moved = points @ T[:3, :3].T + T[:3, 3]
+            moved = transform_points(T, points)
             cons, viol = self.verdicts(moved, s)
             if acceptable(float(np.mean(cons)), float(np.mean(viol))):
                 found.append((T, moved, (cons, viol)))
@@ -478,7 +478,7 @@ class Tracker:
             source = self._confirmed(points, s, T0)
             T = self._fine(source, s, self._coarse(source, s, T0))
             score = -displacement(T, prediction, points)
-            if score > best_score and acceptable(*self.verify(points @ T[:3, :3].T + T[:3, 3], s)):
+            if score > best_score and acceptable(*self.verify(transform_points(T, points), s)):
                 best, best_score = T, score
         return best
 
@@ -594,7 +594,7 @@ class Tracker:
                 T = Ts[s]
                 m = len(x)
                 # both hypotheses' points in one batch: moved by the track, then left in place
-                both = np.concatenate([x @ T[:3, :3].T + T[:3, 3], x])
+                both = np.concatenate([transform_points(T, x), x])
                 cons, viol = self.verdicts(both, s)
                 on = (self.full_tree(s).query(both, distance_upper_bound=fine)[0] < np.inf).astype(int)
                 cons_p, viol_p = cons[:m], viol[:m]
@@ -637,7 +637,7 @@ def refine(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
             if s == p.ref or not np.all(np.isfinite(T0)) or tracker.trees[s] is None:
                 return T0
             T = icp(sample, tracker.trees[s], tracker.targets[s], T0, (fine,), tolerance=ICP_TOLERANCE_VOXELS * tracker.voxel)
-            cons, viol = tracker.verify(sample @ T[:3, :3].T + T[:3, 3], s)
+            cons, viol = tracker.verify(transform_points(T, sample), s)
             return T if acceptable(cons, viol) else T0
 
         Ts = np.array(thread_map(refined, range(len(p.Ts_delta))))
@@ -753,7 +753,7 @@ def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
         cons, viol = tracker.verify(carried(by, anchor, s, points), int(s))
         if viol > MAX_VIOLATED_SHARE or cons < MIN_CONSISTENT_SHARE * (cons + viol):
             T = by.Ts_delta[s]
-            if acceptable(*tracker.verify(own @ T[:3, :3].T + T[:3, 3], int(s))):
+            if acceptable(*tracker.verify(transform_points(T, own), int(s))):
                 return None
             failed.append(int(s))
             if len(failed) > (1.0 - COMOVING_SHARE) * len(steps):
@@ -776,7 +776,7 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
         if common.size < max(COMOVING_SHARE * observed, 1):
             continue
         T = frag.Ts_delta[a]
-        sup = support(tracker, x @ T[:3, :3].T + T[:3, 3], p, a, common)
+        sup = support(tracker, transform_points(T, x), p, a, common)
         if sup is not None and sup[0] > best_support:
             best, (best_support, failed), best_anchor = k, sup, a
     return best, best_anchor, failed
@@ -884,7 +884,7 @@ def _points_with(p: Proposal, other: Proposal, anchor: int) -> np.ndarray:
     """``p``'s points and ``other``'s, carried from ``other``'s reference to ``p``'s through the
     ``anchor`` step both observe (world points at ``p``'s reference, (N + M, 3))."""
     T = np.linalg.inv(p.Ts_delta[anchor]) @ other.Ts_delta[anchor]  # other's reference -> p's
-    return np.concatenate([p.points, other.points @ T[:3, :3].T + T[:3, 3]])
+    return np.concatenate([p.points, transform_points(T, other.points)])
 
 
 def _comoving(new: Proposal, proposals: list[Proposal], tolerance: float) -> tuple[int | None, int | None]:
