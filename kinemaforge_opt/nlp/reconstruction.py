@@ -733,6 +733,12 @@ def stop_free(times: np.ndarray, q: np.ndarray, t_grid: np.ndarray) -> np.ndarra
     return free
 
 
+def parts_seen(data: ScrewData) -> np.ndarray:
+    """(T, parts) True where a moving part has observed points at a step (``data.observed``'s order)."""
+    return np.array([[_rows(obs[i]) > 0 for obs in data.observed.values()] for i in range(data.times.size)],
+                    dtype=bool).reshape(data.times.size, len(data.observed))
+
+
 def seen_free(data: ScrewData, t_grid: np.ndarray) -> np.ndarray:
     """(G − 1,) 1.0 for each interval of ``t_grid`` (G,) [s] between the first and the last
     observed step at which every moving part is seen, else 0.0 (an interval is in when its
@@ -740,10 +746,7 @@ def seen_free(data: ScrewData, t_grid: np.ndarray) -> np.ndarray:
     nothing but the dynamics places it: with the initial state free they swung the tiny door
     0.5 rad open before the first frame that saw it shut, and the fit crawled for 400 iterations
     trading that swing against the door's mass."""
-    seen = np.ones(data.times.size, dtype=bool)
-    for obs in data.observed.values():
-        seen &= np.array([_rows(pts) > 0 for pts in obs])
-    steps = np.flatnonzero(seen)
+    steps = np.flatnonzero(parts_seen(data).all(axis=1))
     free = np.ones(t_grid.size - 1)
     if steps.size < 2:
         return free
@@ -870,8 +873,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         fixed_states = np.zeros((2 * n, G), dtype=bool)
         fixed_states[n:, after] = True
         between = after.copy()
-        seen_frames = [any(_rows(obs[i]) > 0 for obs in data.observed.values()) for i in range(frame_cols.size)]
-        between[frame_cols[seen_frames]] = False
+        between[frame_cols[parts_seen(data).any(axis=1)]] = False
         fixed_states[:n, between] = True
         lower[fixed_states] = upper[fixed_states] = x_init[fixed_states]
         X = prob.variable("x", (2 * n, G), init=np.vstack([q0.T, v0.T]), lower=lower, upper=upper)
