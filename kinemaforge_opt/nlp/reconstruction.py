@@ -391,7 +391,7 @@ def state_model(data: ScrewData, state: ScrewState) -> ArticulatedModel:
     limits those of q at the observed steps (:func:`stop_limits`, as the written URDF's)."""
     model = _with_origins(data.model, state.origins)
     cols = np.searchsorted(state.t, data.times)
-    ranges = stop_limits(data.times, state.q[cols])
+    ranges = stop_limits(data.times, state.q[cols], joints_seen(data))
     for k, j in enumerate(model.movable_joints):
         lim = j.limits if j.limits is not None else JointLimits()
         limits = JointLimits(float(ranges[k, 0]), float(ranges[k, 1]), lim.effort, lim.velocity)
@@ -694,18 +694,58 @@ def stop_spans(times: np.ndarray, q: np.ndarray) -> list[tuple[int, int]]:
     return sorted((e.i - 1, min(e.b + 1, times.size - 1)) for e in stop_impacts(times, q))
 
 
-def stop_limits(times: np.ndarray, q: np.ndarray) -> np.ndarray:
+def stop_limits(times: np.ndarray, q: np.ndarray, seen: np.ndarray | None = None) -> np.ndarray:
     """(n, 2) lower and upper limits [rad or m] of the joints moving as q (T, n) at the frames
     ``times`` (T,) [s]: the observed range, but an end where a joint hit a stop and then rested
     against it off the impact frame's band (:func:`stop_impacts`) is where it rests (the
     impact frame caught the compliant stop pressed in; a simulator's stop at that depth would hold
     the joint there: protocol_laptop_1@s1's lid, resting at 0.001 rad under a limit at 0.077 rad,
-    replayed 9 mm off after 50 s, 0.2 mm with the limit where it rests)."""
+    replayed 9 mm off after 50 s, 0.2 mm with the limit where it rests).
+
+    ``seen`` (T, n) bool: where each joint's child part is observed (default: where q is finite).  Only
+    the frames from a joint's first to its last seen one count.  An end the joint takes at its
+    first seen frame while moving off it, with frames before that unseen (or at its last seen
+    frame, arriving, with frames after unseen), is no observed stop: it moves out by the farthest
+    the joint can have gone unseen, its fastest observed frame-step speed × the unseen time
+    (:func:`unseen_reach`; protocol_microwave_1@s1's door, first seen 0.475 s into a push at
+    1.8 rad/s: with its limit at that first pose the energy books read the push as a stop, energy
+    residual 0.54; with any limit past it, 0.11)."""
     q = _time_major(times, q)
-    limits = np.column_stack([q.min(axis=0), q.max(axis=0)])
-    for e in stop_impacts(times, q):
-        limits[e.k, int(e.end == limits[e.k, 1])] = e.rest
+    seen = np.isfinite(q) if seen is None else np.asarray(seen, dtype=bool).reshape(q.shape)
+    limits = np.full((q.shape[1], 2), np.nan)
+    for k in range(q.shape[1]):
+        rows = np.flatnonzero(seen[:, k])
+        if rows.size == 0:
+            continue
+        rows = np.arange(rows[0], rows[-1] + 1)
+        rows = rows[np.isfinite(q[rows, k])]
+        tk, qk = times[rows], q[rows, k]
+        limits[k] = qk.min(), qk.max()
+        for e in stop_impacts(tk, qk[:, None]):
+            limits[k, int(e.end == limits[k, 1])] = e.rest
+        limits[k] += unseen_reach(tk, qk, times[0], times[-1], limits[k])
     return limits
+
+
+def unseen_reach(times: np.ndarray, q: np.ndarray, start: float, end: float, limits: np.ndarray) -> np.ndarray:
+    """(2,) how far [rad or m] the lower and upper limits ``limits`` (2,) of a joint seen moving as
+    q (S,) at ``times`` (S,) [s] move out (−, +) for the unseen time from ``start`` [s] to its first
+    seen frame and from its last to ``end`` [s]: when it is at an end of ``limits`` at its first
+    seen frame and moves off it faster than STOP_MIN_SPEED × its fastest frame step (or arrives
+    at one so at its last), by that fastest speed × the unseen time.  Zero elsewhere."""
+    reach = np.zeros(2)
+    if q.size < 2:
+        return reach
+    speed = np.diff(q) / np.diff(times)
+    fastest = float(np.abs(speed).max())
+    # (the frame, the direction of travel into the unseen time, how long it is unseen)
+    for i, v, hidden in ((0, -speed[0], times[0] - start), (-1, speed[-1], end - times[-1])):
+        if hidden <= 0 or abs(v) <= STOP_MIN_SPEED * fastest:
+            continue
+        side = int(v > 0)
+        if q[i] == limits[side]:
+            reach[side] = (1.0 if side else -1.0) * fastest * hidden
+    return reach
 
 
 def _impact(s: np.ndarray, drop: np.ndarray, i: int, leaves: bool) -> bool:
@@ -737,6 +777,15 @@ def parts_seen(data: ScrewData) -> np.ndarray:
     """(T, parts) True where a moving part has observed points at a step (``data.observed``'s order)."""
     return np.array([[_rows(obs[i]) > 0 for obs in data.observed.values()] for i in range(data.times.size)],
                     dtype=bool).reshape(data.times.size, len(data.observed))
+
+
+def joints_seen(data: ScrewData) -> np.ndarray:
+    """(T, n) True where each movable joint's child part is seen at a step (every step for a child
+    with no observations)."""
+    seen = parts_seen(data)
+    parts = list(data.observed)
+    return np.column_stack([seen[:, parts.index(j.child)] if j.child in parts else np.ones(data.times.size, dtype=bool)
+                            for j in data.model.movable_joints]).reshape(data.times.size, data.model.nq)
 
 
 def seen_free(data: ScrewData, t_grid: np.ndarray) -> np.ndarray:

@@ -278,7 +278,8 @@ def part_masses(per: Perception, reps: dict[str, int], labels: list[np.ndarray],
 
 def build_model(per: Perception, graph: GraphResult, density: float, name: str = "reconstruction",
                 lines: dict[str, JointLine] | None = None, labels: list[np.ndarray] | None = None,
-                masses: dict[str, MassProperties] | None = None, gravity=(0.0, 0.0, -9.81)):
+                masses: dict[str, MassProperties] | None = None, gravity=(0.0, 0.0, -9.81),
+                limits: dict[str, JointLimits] | None = None):
     """Kinematic tree + fused points -> (ArticulatedModel, joint records, part clouds at zero,
     meshes, point labels, part masses, mass report).  Joint records follow the
     reconstruction.json contract.  Moving links' mass properties come from :func:`part_masses`
@@ -287,7 +288,8 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
     joints as world lines (default: :func:`closed_form_lines`, the graph's closed form).
     ``labels`` (:func:`point_labels`) and ``masses`` (:func:`part_masses`) when already computed:
     neither depends on ``lines``.  ``gravity``: (3,) world gravity [m/s²], the sequence's (the
-    root link's frame is the world frame)."""
+    root link's frame is the world frame).  ``limits``: joint name -> limits to write (the NLP's);
+    by default those of the lines' q (:func:`~kinemaforge_opt.nlp.reconstruction.stop_limits`)."""
     tracks, tree = per.tracks, graph.best
     lines = closed_form_lines(per, graph) if lines is None else lines
     part_of = track_parts(graph, tracks)
@@ -304,16 +306,15 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
         T_world_link0[j.child] = T_world_joint
         T_parent_joint = inverse(T_world_link0[j.parent]) @ T_world_joint
         axis_joint = T_world_joint[:3, :3].T @ axis
-        seen = np.isfinite(line.q)
-        # the observed range; where the joint rests against a stop, there (stop_limits)
-        limits = JointLimits(*map(float, stop_limits(tracks.times[seen], line.q[seen])[0])) if jtype != "fixed" else None
+        # the observed range (its unseen ends widened); where the joint rests against a stop, there (stop_limits)
+        lim = None if jtype == "fixed" else (limits or {}).get(j.name) or JointLimits(*map(float, stop_limits(tracks.times, line.q)[0]))
         joints.append(Joint(j.name, jtype, j.parent, j.child, T_parent_joint, axis_joint,
-                            line.pitch if jtype == "helical" else 0.0, limits))
+                            line.pitch if jtype == "helical" else 0.0, lim))
         records.append({
             "name": j.name, "type": jtype, "parent": j.parent, "child": j.child,
             "axis_world": np.asarray(axis, float).tolist(), "origin_world": np.asarray(origin, float).tolist(),
             "pitch": float(line.pitch),
-            "limits": None if limits is None else [limits.lower, limits.upper],
+            "limits": None if lim is None else [lim.lower, lim.upper],
             "confidence": float(h.confidence), "residual_rms_m": float(h.residual_rms),
             **({"radius": float(h.radius)} if h.radius is not None else {}),
         })
@@ -490,8 +491,9 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
     # the NLP fits the labels of the perception stage; the parts' solids over the final joints'
     # motion then claim their insides for the meshes and the reported labels
     labels = _with_part_solids(per, labels, moved, q)
-    model, records, clouds_world, meshes, labels, _, mass_report = build_model(per, graph, density, name, final_lines,
-                                                                               labels, masses, seq.gravity)
+    model, records, clouds_world, meshes, labels, _, mass_report = build_model(
+        per, graph, density, name, final_lines, labels, masses, seq.gravity,
+        limits={j.name: j.limits for j in moved.movable_joints} if options is not None else None)
     if options is None:
         return model, records, clouds_world, meshes, labels, None, mass_report
     model = _apply_identified(model, records, result, data.model)
