@@ -705,11 +705,12 @@ def stop_limits(times: np.ndarray, q: np.ndarray, seen: np.ndarray | None = None
     ``seen`` (T, n) bool: where each joint's child part is observed (default: where q is finite).  Only
     the frames from a joint's first to its last seen one count.  An end the joint takes at its
     first seen frame while moving off it, with frames before that unseen (or at its last seen
-    frame, arriving, with frames after unseen), is no observed stop: it moves out by the farthest
-    the joint can have gone unseen, its fastest observed frame-step speed × the unseen time
-    (:func:`unseen_reach`; protocol_microwave_1@s1's door, first seen 0.475 s into a push at
+    frame, arriving, with frames after unseen), is no observed stop: it moves out by the way the
+    joint's fastest observed frame-step speed covers in the unseen time (:func:`unseen_reach`; an
+    estimate, not a bound: the tiny test door, first seen 0.67 s into its push, gets −0.63 rad
+    for a true −0.93).  protocol_microwave_1@s1's door, first seen 0.475 s into a push at
     1.8 rad/s: with its limit at that first pose the energy books read the push as a stop, energy
-    residual 0.54; with any limit past it, 0.11)."""
+    residual 0.54; with any limit past it, 0.11."""
     q = _time_major(times, q)
     seen = np.isfinite(q) if seen is None else np.asarray(seen, dtype=bool).reshape(q.shape)
     limits = np.full((q.shape[1], 2), np.nan)

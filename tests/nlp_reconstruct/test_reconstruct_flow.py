@@ -116,4 +116,8 @@ def test_the_same_scene_in_a_world_with_gravity_along_y_is_the_same_model_turned
         assert axis_error_deg(np.asarray(jy["axis_world"]), axis) < 0.01
         assert origin_error_m(np.asarray(jy["axis_world"]), np.asarray(jy["origin_world"]),
                               R @ np.asarray(jz["origin_world"])) < 1e-4
-    assert drift["y"] == pytest.approx(drift["z"], abs=1e-3)
+    # The door's mass ratio is not identified here (the NLP reports none): the two worlds' IPOPT
+    # paths leave it 2 % apart (0.126 / 0.129 when written), and the replay of a door that is free
+    # below its first tracked pose follows (1-s drift 0.094 / 0.083 m).  What this guards against
+    # is the model keeping -z gravity in a y-up world: 0.29 m against 0.0005 m.
+    assert drift["y"] == pytest.approx(drift["z"], rel=0.25)
