@@ -716,10 +716,10 @@ def stop_limits(times: np.ndarray, q: np.ndarray, seen: np.ndarray | None = None
     limits = np.full((q.shape[1], 2), np.nan)
     for k in range(q.shape[1]):
         rows = np.flatnonzero(seen[:, k])
+        rows = np.arange(rows[0], rows[-1] + 1) if rows.size else np.arange(times.size)  # never seen: every frame
+        rows = rows[np.isfinite(q[rows, k])]
         if rows.size == 0:
             continue
-        rows = np.arange(rows[0], rows[-1] + 1)
-        rows = rows[np.isfinite(q[rows, k])]
         tk, qk = times[rows], q[rows, k]
         limits[k] = qk.min(), qk.max()
         for e in stop_impacts(tk, qk[:, None]):

@@ -40,3 +40,8 @@ def test_unseen_values_are_ignored_and_joints_are_masked_one_by_one():
     limits = stop_limits(T, q)  # default mask: where q is finite
     assert limits[0] == pytest.approx([0.5 - 0.5, 1.2], abs=1e-9)
     assert limits[1] == pytest.approx([0.0, 0.15], abs=1e-9)
+
+
+def test_a_joint_whose_part_is_never_seen_keeps_the_range_of_its_values():
+    q = door(T)[:, None]
+    np.testing.assert_allclose(stop_limits(T, q, np.zeros((T.size, 1), dtype=bool)), [[0.0, 1.2]], atol=1e-9)
