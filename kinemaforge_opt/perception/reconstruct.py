@@ -29,7 +29,8 @@ from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks
 from ..model import ArticulatedModel, Geometry, Inertial, Joint, JointLimits, Link, write_urdf
 from ..nlp.gravity_aligned import face_directions
-from ..nlp.reconstruction import ScrewData, ScrewOptions, ScrewResult, refine_screws, stop_limits, with_ratios
+from ..nlp.reconstruction import (ScrewData, ScrewOptions, ScrewResult, joints_seen, refine_screws, stop_limits,
+                                  unseen_carried_on, with_ratios)
 from ..nlp.visual import surface_model
 from ..parallel import thread_map
 from ..spatial import inverse, make_transform
@@ -487,7 +488,9 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
         data = screw_data(per, seq, model, lines, clouds_world, labels)
         prepare_s = time.perf_counter() - t0
         result = refine_screws(data, options)
-        final_lines, moved, q = refined_lines(result, per, lines), result.model, result.q
+        final_lines, moved = refined_lines(result, per, lines), result.model
+        limits = np.array([[j.limits.lower, j.limits.upper] for j in moved.movable_joints])
+        q = unseen_carried_on(data.times, result.q, joints_seen(data), limits)
     # the NLP fits the labels of the perception stage; the parts' solids over the final joints'
     # motion then claim their insides for the meshes and the reported labels
     labels = _with_part_solids(per, labels, moved, q)

@@ -45,3 +45,15 @@ def test_unseen_values_are_ignored_and_joints_are_masked_one_by_one():
 def test_a_joint_whose_part_is_never_seen_keeps_the_range_of_its_values():
     q = door(T)[:, None]
     np.testing.assert_allclose(stop_limits(T, q, np.zeros((T.size, 1), dtype=bool)), [[0.0, 1.2]], atol=1e-9)
+
+
+def test_unseen_frames_carry_the_first_and_last_seen_speed_within_the_limits():
+    from kinemaforge_opt.nlp.reconstruction import unseen_carried_on
+
+    q = door(T)[:, None]
+    seen = ((T >= 0.3 - 1e-9) & (T <= 0.8 + 1e-9))[:, None]
+    held = np.where(T < 0.3, 0.3, np.where(T > 0.8, 0.8, q[:, 0]))[:, None]  # as the NLP holds them
+    carried = unseen_carried_on(T, held, seen, np.array([[0.1, 1.0]]))
+    # 1 rad/s at both ends of the seen span: back to 0.1 (the lower limit) and on to 1.0
+    np.testing.assert_allclose(carried[:, 0], np.clip(T, 0.1, 1.0), atol=1e-9)
+    np.testing.assert_array_equal(carried[seen[:, 0]], held[seen[:, 0]])  # seen frames untouched
