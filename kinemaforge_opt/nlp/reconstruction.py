@@ -785,10 +785,10 @@ def unseen_carried_on(times: np.ndarray, q: np.ndarray, seen: np.ndarray, limits
     frame (``seen`` (T, n)) carried back at the speed of its first seen frame step, and after its
     last carried on at that of its last, within ``limits`` (n, 2) [rad or m].  The NLP holds
     those values (nothing there places the part); this is a guess for placing the part in frames
-    the tracker missed (its solid claims the points there, :func:`~kinemaforge_opt.perception.
-    solids.fill_part_solids`): protocol_microwave_1@s1's door, first seen 0.475 s into its push,
-    held at that pose its part IoU was 0.913, carried back 0.954 (true frame poses −0.62, −0.53,
-    −0.29 rad; carried −0.875, −0.58, −0.29)."""
+    the tracker missed (its solid claims the points there:
+    :func:`~kinemaforge_opt.perception.solids.fill_part_solids`).  protocol_microwave_1@s1's
+    door, first seen 0.475 s into its push: held at that pose its part IoU was 0.913, carried
+    back 0.954 (true frame poses −0.62, −0.53, −0.29 rad; carried −0.875, −0.58, −0.29)."""
     out = np.array(q, dtype=float, copy=True)
     for k in range(out.shape[1]):
         rows = np.flatnonzero(seen[:, k])
