@@ -705,12 +705,13 @@ def stop_limits(times: np.ndarray, q: np.ndarray, seen: np.ndarray | None = None
     ``seen`` (T, n) bool: where each joint's child part is observed (default: where q is finite).  Only
     the frames from a joint's first to its last seen one count.  An end the joint takes at its
     first seen frame while moving off it, with frames before that unseen (or at its last seen
-    frame, arriving, with frames after unseen), is no observed stop: it moves out by the way the
-    joint's fastest observed frame-step speed covers in the unseen time (:func:`unseen_reach`; an
-    estimate, not a bound: the tiny test door, first seen 0.67 s into its push, gets −0.63 rad
-    for a true −0.93).  protocol_microwave_1@s1's door, first seen 0.475 s into a push at
-    1.8 rad/s: with its limit at that first pose the energy books read the push as a stop, energy
-    residual 0.54; with any limit past it, 0.11."""
+    frame, arriving, with frames after unseen), is no observed stop when the joint was slowing
+    down as it left it (speeding up as it arrived): it moves out by the way that frame step's
+    speed covers in the unseen time (:func:`unseen_reach`; an estimate, not a bound: the tiny
+    test door, first seen 0.67 s into its push, gets −0.63 rad for a true −0.93).
+    protocol_microwave_1@s1's door, first seen 0.475 s into a push at 1.8 rad/s: with its limit
+    at that first pose the energy books read the push as a stop, energy residual 0.54; with any
+    limit past it, 0.11."""
     q = _time_major(times, q)
     seen = np.isfinite(q) if seen is None else np.asarray(seen, dtype=bool).reshape(q.shape)
     limits = np.full((q.shape[1], 2), np.nan)
@@ -732,20 +733,25 @@ def unseen_reach(times: np.ndarray, q: np.ndarray, start: float, end: float, lim
     """(2,) how far [rad or m] the lower and upper limits ``limits`` (2,) of a joint seen moving as
     q (S,) at ``times`` (S,) [s] move out (−, +) for the unseen time from ``start`` [s] to its first
     seen frame and from its last to ``end`` [s]: when it is at an end of ``limits`` at its first
-    seen frame and moves off it faster than STOP_MIN_SPEED × its fastest frame step (or arrives
-    at one so at its last), by that fastest speed × the unseen time.  Zero elsewhere."""
+    seen frame and was slowing down as it left it (its first frame step faster than its second,
+    and faster than STOP_MIN_SPEED × its fastest step: it came from farther), by that first step's
+    speed × the unseen time; the same, reversed in time, for an end it arrived at speeding up at
+    its last seen frame.  A joint that speeds up off its first seen pose may have started there
+    (protocol_cabinet_multi_0's drawer, first seen 3.2 s in as it is pulled out at a steady
+    0.28 m/s: moved out by its fastest speed × the unseen time, its closed end went 0.9 m into
+    the carcass and the replay's 1-s drift 0.19 → 0.36 m).  Zero elsewhere."""
     reach = np.zeros(2)
-    if q.size < 2:
+    if q.size < 3:
         return reach
     speed = np.diff(q) / np.diff(times)
     fastest = float(np.abs(speed).max())
-    # (the frame, the direction of travel into the unseen time, how long it is unseen)
-    for i, v, hidden in ((0, -speed[0], times[0] - start), (-1, speed[-1], end - times[-1])):
-        if hidden <= 0 or abs(v) <= STOP_MIN_SPEED * fastest:
+    # (the frame, its step's speed into the unseen time, the next step's, how long it is unseen)
+    for i, v, v_next, hidden in ((0, -speed[0], -speed[1], times[0] - start), (-1, speed[-1], speed[-2], end - times[-1])):
+        if hidden <= 0 or abs(v) <= STOP_MIN_SPEED * fastest or v * v_next <= 0 or abs(v_next) >= abs(v):
             continue
         side = int(v > 0)
         if q[i] == limits[side]:
-            reach[side] = (1.0 if side else -1.0) * fastest * hidden
+            reach[side] = v * hidden
     return reach
 
 
