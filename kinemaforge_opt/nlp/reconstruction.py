@@ -91,6 +91,12 @@ SHAPE_PRIOR_SIGMA = float(np.log(1.1))
 STOP_DROP = 2.0
 STOP_MIN_SPEED = 0.1
 STOP_REST = 0.5
+# A joint first seen moving off an end of its range came from farther when its second frame step
+# is at most this share of its first: clearly slowing.  A steady motion's frame-step speeds differ
+# by far less (protocol_cabinet_multi_0's drawer, pulled out when first seen: 0.2838, 0.2832 m/s);
+# a door first seen after its push had lost 28 % (protocol_microwave_1@s1) and 45 % (the tiny
+# test door) by its second step.
+UNSEEN_SLOWING = 0.9
 # Share of a joint's observed range within which it is at an end of that range.
 STOP_BAND = 0.02
 # The visual term Σ ρ(r)/δ² is ≈ ½ χ² of the point residuals: an unconverged stage whose iterate
@@ -733,10 +739,10 @@ def unseen_reach(times: np.ndarray, q: np.ndarray, start: float, end: float, lim
     """(2,) how far [rad or m] the lower and upper limits ``limits`` (2,) of a joint seen moving as
     q (S,) at ``times`` (S,) [s] move out (−, +) for the unseen time from ``start`` [s] to its first
     seen frame and from its last to ``end`` [s]: when it is at an end of ``limits`` at its first
-    seen frame and was slowing down as it left it (its first frame step faster than its second,
-    and faster than STOP_MIN_SPEED × its fastest step: it came from farther), by that first step's
-    speed × the unseen time; the same, reversed in time, for an end it arrived at speeding up at
-    its last seen frame.  A joint that speeds up off its first seen pose may have started there
+    seen frame and was slowing down as it left it (its second frame step at most UNSEEN_SLOWING ×
+    its first, and the first faster than STOP_MIN_SPEED × its fastest step: it came from
+    farther), by that first step's speed × the unseen time; the same, reversed in time, for an
+    end it arrived at speeding up at its last seen frame.  A joint that speeds up off its first seen pose may have started there
     (protocol_cabinet_multi_0's drawer, first seen 3.2 s in as it is pulled out at a steady
     0.28 m/s: moved out by its fastest speed × the unseen time, its closed end went 0.9 m into
     the carcass and the replay's 1-s drift 0.19 → 0.36 m).  Zero elsewhere."""
@@ -747,7 +753,7 @@ def unseen_reach(times: np.ndarray, q: np.ndarray, start: float, end: float, lim
     fastest = float(np.abs(speed).max())
     # (the frame, its step's speed into the unseen time, the next step's, how long it is unseen)
     for i, v, v_next, hidden in ((0, -speed[0], -speed[1], times[0] - start), (-1, speed[-1], speed[-2], end - times[-1])):
-        if hidden <= 0 or abs(v) <= STOP_MIN_SPEED * fastest or v * v_next <= 0 or abs(v_next) >= abs(v):
+        if hidden <= 0 or abs(v) <= STOP_MIN_SPEED * fastest or v * v_next <= 0 or abs(v_next) > UNSEEN_SLOWING * abs(v):
             continue
         side = int(v > 0)
         if q[i] == limits[side]:
