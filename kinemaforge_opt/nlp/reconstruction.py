@@ -742,10 +742,11 @@ def unseen_reach(times: np.ndarray, q: np.ndarray, start: float, end: float, lim
     seen frame and was slowing down as it left it (its second frame step at most UNSEEN_SLOWING ×
     its first, and the first faster than STOP_MIN_SPEED × its fastest step: it came from
     farther), by that first step's speed × the unseen time; the same, reversed in time, for an
-    end it arrived at speeding up at its last seen frame.  A joint that speeds up off its first seen pose may have started there
-    (protocol_cabinet_multi_0's drawer, first seen 3.2 s in as it is pulled out at a steady
-    0.28 m/s: moved out by its fastest speed × the unseen time, its closed end went 0.9 m into
-    the carcass and the replay's 1-s drift 0.19 → 0.36 m).  Zero elsewhere."""
+    end it arrived at speeding up at its last seen frame.  Zero elsewhere.  A joint that leaves
+    its first seen pose speeding up or steadily may have started there: protocol_cabinet_multi_0's
+    drawer, first seen 3.2 s in as it is pulled out at a steady 0.28 m/s, had its closed end put
+    0.9 m into the carcass by a first version of this rule that moved every end left in motion
+    (by the fastest speed × the unseen time), and the replay's 1-s drift went 0.19 → 0.36 m."""
     reach = np.zeros(2)
     if q.size < 3:
         return reach
