@@ -84,7 +84,10 @@ are at most 1 − COMOVING_SHARE of them; they are unobserved after the merge.  
 motion is the simpler explanation when the images cannot tell the two motions apart, so the
 proposal's points join that part (:func:`absorb`); of several parts the one whose motion the
 images confirm most is taken.  A second drawer moving at other times puts the points in the air
-in front of the body (seen through) and is no explanation.
+in front of the body (seen through) and is no explanation — or inside the body, where nothing
+contradicts them but nothing confirms them either: so the other motion must also confirm the
+points (share confirmed minus share seen through, at the steps its track holds) within
+1 − COMOVING_SHARE of what the proposal's own motion confirms (:func:`confirmed`).
 
 Duplicates: a part can be tracked twice, once truly and once by a piece sliding along it (a flat
 door), whose grown points the true motion puts partly in seen-through space, so neither explains
@@ -775,11 +778,25 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
         common, a = _common_anchor(frag, p)
         if common.size < max(COMOVING_SHARE * observed, 1):
             continue
-        T = frag.Ts_delta[a]
-        sup = support(tracker, transform_points(T, x), p, a, common)
-        if sup is not None and sup[0] > best_support:
-            best, (best_support, failed), best_anchor = k, sup, a
+        xa = transform_points(frag.Ts_delta[a], x)
+        sup = support(tracker, xa, p, a, common)
+        if sup is None or sup[0] <= best_support:
+            continue
+        # the images must not tell the two motions apart: at the steps the other track holds,
+        # its motion confirms the points nearly as often as the fragment's own (a drawer's points
+        # carried by the drawer above it hide in the body, uncontradicted, but unconfirmed)
+        held = [s for s in common if s not in sup[1]]
+        if confirmed(tracker, xa, p, a, held) < confirmed(tracker, xa, frag, a, held) - (1.0 - COMOVING_SHARE):
+            continue
+        best, (best_support, failed), best_anchor = k, sup, a
     return best, best_anchor, failed
+
+
+def confirmed(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, steps: list[int]) -> float:
+    """Mean over ``steps`` of the share of (N, 3) world points at step ``anchor``, carried by
+    ``by``'s motion, that the images confirm minus the share they see through (0 without steps)."""
+    shares = [np.subtract(*tracker.verify(carried(by, anchor, s, points), int(s))) for s in steps]
+    return float(np.mean(shares)) if shares else 0.0
 
 
 def absorb(p: Proposal, frag: Proposal, anchor: int, failed: list[int] = ()) -> Proposal:

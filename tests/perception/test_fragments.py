@@ -126,3 +126,21 @@ def test_a_drawer_that_differs_at_two_steps_only_is_not_absorbed_by_another():
     front_a = Proposal("a", 4, fa - [0.0, ya[4], 0.0], _motion(ya, 4))
     front_b = Proposal("b", 4, fb - [0.0, yb[4], 0.0], _motion(yb, 4))
     assert explained_by(oracle, front_b, [front_a, front_b]) == (None, None, [])
+
+
+def test_a_drawer_panel_carried_into_the_carcass_by_another_drawer_is_not_its_fragment():
+    """Drawer A opens over steps 0-8 and stays open; B opens over 8-16.  B's back panel, tracked
+    truly over B's stroke, carried by A's motion instead (at rest then) stays inside the carcass:
+    hidden, so nothing contradicts it, but confirmed at B's reference step only, where its own
+    motion is confirmed at every step.  The images tell the two motions apart: no fragment."""
+    (fa, wa), (fb, wb) = _drawer(0.05), _drawer(0.3)
+    back_b = _grid(np.linspace(-0.19, 0.19, 39), [0.38], np.linspace(0.3, 0.45, 16))
+    ya, yb = _stroke(0), _stroke(8)
+    shift = lambda pts, y: pts - np.array([0.0, y, 0.0])
+    oracle = _Oracle([np.concatenate([shift(fa, a), shift(fb, b), shift(back_b, b)]) for a, b in zip(ya, yb)])
+    front_a = Proposal("front_a", 4, shift(fa, ya[4]), _motion(ya, 4))
+    Ts = _motion(yb, 12)
+    Ts[:8] = np.nan  # the panel is seen only once B moves
+    panel = Proposal("back_b", 12, shift(back_b, yb[12]), Ts)
+    assert explained_by(oracle, panel, [front_a, panel]) == (None, None, [])
+    assert [p.name for p in merge_fragments(oracle, [front_a, panel])] == ["front_a", "back_b"]
