@@ -450,7 +450,8 @@ class Tracker:
         (module doc): narrow and wide coarse ICP from each distinct guess, the fine pass from each
         distinct coarse pose, and of the acceptable results the best :meth:`fit`; with none,
         :meth:`redetect`.  floor: when no result fits better than this, the acceptable
-        :meth:`cluster_alignments` compete too, after the guesses' results (FIT_DROP)."""
+        :meth:`cluster_alignments` that fit at least this well compete too, after the guesses'
+        results (FIT_DROP)."""
         if self.trees[s] is None or len(self.targets[s]) < 3:
             return None
         apart = START_SEPARATION_VOXELS * self.voxel
@@ -471,7 +472,8 @@ class Tracker:
             if acceptable(float(np.mean(cons)), float(np.mean(viol))):
                 found.append((T, moved, (cons, viol)))
         if floor is not None and max((self.fit(f[1], s, f[2]) for f in found), default=-np.inf) < floor:
-            found += self.cluster_alignments(points, s, guesses[0])
+            # only an alignment that fits as the track did is a rescue, not a step hidden in part
+            found += [f for f in self.cluster_alignments(points, s, guesses[0]) if self.fit(f[1], s, f[2]) >= floor]
         if not found:
             return self.redetect(points, s, guesses[0])
         if len(found) == 1:

@@ -72,3 +72,48 @@ def test_coarse_poses_in_one_basin_get_one_fine_pass():
     T = tracker.solve_step(FRONT, 1, [_pose(t=(0.001, 0.0, 0.0)), np.eye(4)])
     assert len(tracker.fine_starts) == 1
     np.testing.assert_allclose(T, near)
+
+
+PULLED = _pose(t=(0.0, -0.13, 0.0))  # pulled 13 cm in one step from rest: beyond the wide reach
+BELOW = _pose(t=(0.0, -0.19, -0.19))  # the identical front of the open drawer below
+LEFT_SHORT = _pose(t=(0.0, -0.09, 0.0))  # ICP from rest stops 4 cm short: within TAU, off the surface
+
+
+class _TwoFronts(_Scripted):
+    """One step (s = 1) whose moving clusters are two identical drawer fronts, at PULLED and BELOW;
+    ICP from the guess (rest) ends at LEFT_SHORT, from any other start where it started."""
+
+    def __init__(self):
+        self.fronts = [FRONT @ T[:3, :3].T + T[:3, 3] for T in (PULLED, BELOW)]
+        surface = np.concatenate(self.fronts)
+        self.voxel, self.fine_starts = VOXEL, []
+        self.targets, self.trees = [surface] * 2, [cKDTree(surface)] * 2
+        self._full_trees = {1: self.trees[1]}
+
+    def moving_clusters(self, s):
+        return self.fronts
+
+    def _coarse(self, points, s, T0, wide=False):
+        return LEFT_SHORT if np.allclose(T0, np.eye(4)) else T0
+
+
+def test_a_front_pulled_beyond_reach_is_found_on_its_own_moving_cluster():
+    tracker = _TwoFronts()
+    assert tracker.verify(FRONT @ LEFT_SHORT[:3, :3].T + LEFT_SHORT[:3, 3], 1) == (1.0, 0.0)  # accepted ...
+    assert tracker.fit(FRONT @ LEFT_SHORT[:3, :3].T + LEFT_SHORT[:3, 3], 1) == 0.0  # ... but on no surface
+    # without a floor the accepted result stands
+    np.testing.assert_allclose(tracker.solve_step(FRONT, 1, [np.eye(4)]), LEFT_SHORT)
+    # the track fitted fully a step before: both fronts fit as well, the one nearer rest is taken
+    np.testing.assert_allclose(tracker.solve_step(FRONT, 1, [np.eye(4)], floor=0.8), PULLED, atol=1e-9)
+
+
+def test_no_alignments_are_tried_while_the_guess_fits_as_the_track_did():
+    tracker = _TwoFronts()
+    tracker._coarse = lambda points, s, T0, wide=False: PULLED  # ICP from rest reaches the front
+    tried = []
+    tracker.cluster_alignments = lambda *args: tried.append(args) or []
+    np.testing.assert_allclose(tracker.solve_step(FRONT, 1, [np.eye(4)], floor=0.8), PULLED)
+    assert not tried
+    tracker._coarse = lambda points, s, T0, wide=False: LEFT_SHORT
+    tracker.solve_step(FRONT, 1, [np.eye(4)], floor=0.8)
+    assert len(tried) == 1
