@@ -135,7 +135,7 @@ FIT_TIE_SIGMAS = 2.0
 # track's previous pose did is a part that may have moved beyond ICP's reach from every guess
 # (a drawer pulled 13 cm between two samples from rest: from the last pose, ICP tipped its front
 # 0.8 rad onto the drawer's floor, fit 0.55 against 1.0): alignments onto the step's moving
-# clusters are tried too (Tracker.solve_step).
+# clusters are tried too (Tracker.solve_step), if the last pose fitted at least 1 - FIT_DROP.
 FIT_DROP = 0.2
 # ICP stops when an iteration moves the points by less than this share of a voxel.
 ICP_TOLERANCE_VOXELS = 0.05
@@ -450,8 +450,8 @@ class Tracker:
         (module doc): narrow and wide coarse ICP from each distinct guess, the fine pass from each
         distinct coarse pose, and of the acceptable results the best :meth:`fit`; with none,
         :meth:`redetect`.  floor: when no result fits better than this, the acceptable
-        :meth:`cluster_alignments` that fit at least this well compete too, after the guesses'
-        results (FIT_DROP)."""
+        :meth:`cluster_alignments` that fit at least this well, within the points' RMS radius of
+        the prediction (``guesses[0]``), compete too, after the guesses' results (FIT_DROP)."""
         if self.trees[s] is None or len(self.targets[s]) < 3:
             return None
         apart = START_SEPARATION_VOXELS * self.voxel
@@ -472,8 +472,12 @@ class Tracker:
             if acceptable(float(np.mean(cons)), float(np.mean(viol))):
                 found.append((T, moved, (cons, viol)))
         if floor is not None and max((self.fit(f[1], s, f[2]) for f in found), default=-np.inf) < floor:
-            # only an alignment that fits as the track did is a rescue, not a step hidden in part
-            found += [f for f in self.cluster_alignments(points, s, guesses[0]) if self.fit(f[1], s, f[2]) >= floor]
+            # a rescue fits as the track did (not a step where the part is hidden in part) and lies
+            # within the part's own size of the prediction (a small patch fits any flat surface:
+            # a drawer side's 671 points went onto the body 22 cm away)
+            size = np.sqrt(np.mean(np.sum((points - points.mean(axis=0)) ** 2, axis=1)))
+            found += [f for f in self.cluster_alignments(points, s, guesses[0])
+                      if self.fit(f[1], s, f[2]) >= floor and displacement(f[0], guesses[0], points) <= size]
         if not found:
             return self.redetect(points, s, guesses[0])
         if len(found) == 1:
@@ -542,8 +546,9 @@ class Tracker:
             while 0 <= s < n:
                 # constant velocity first, then the last pose
                 guesses = [_predict(solved), solved[-1]] if len(solved) >= 2 else [solved[-1]]
-                floor = self.fit(transform_points(solved[-1], sample), steps[-1]) - FIT_DROP
-                T = self.solve_step(sample, s, guesses, floor)
+                # a track that fitted well and falls is rescued (FIT_DROP); a failing one is not
+                last = self.fit(transform_points(solved[-1], sample), steps[-1])
+                T = self.solve_step(sample, s, guesses, last - FIT_DROP if last >= 1.0 - FIT_DROP else None)
                 s += direction
                 if T is None:
                     continue

@@ -74,9 +74,9 @@ def test_coarse_poses_in_one_basin_get_one_fine_pass():
     np.testing.assert_allclose(T, near)
 
 
-PULLED = _pose(t=(0.0, -0.13, 0.0))  # pulled 13 cm in one step from rest: beyond the wide reach
+PULLED = _pose(t=(0.0, -0.11, 0.0))  # pulled 11 cm in one step from rest: beyond the wide reach
 BELOW = _pose(t=(0.0, -0.19, -0.19))  # the identical front of the open drawer below
-LEFT_SHORT = _pose(t=(0.0, -0.09, 0.0))  # ICP from rest stops 4 cm short: within TAU, off the surface
+LEFT_SHORT = _pose(t=(0.0, -0.07, 0.0))  # ICP from rest stops 4 cm short: within TAU, off the surface
 
 
 class _TwoFronts(_Scripted):
@@ -105,6 +105,9 @@ def test_a_front_pulled_beyond_reach_is_found_on_its_own_moving_cluster():
     np.testing.assert_allclose(tracker.solve_step(FRONT, 1, [np.eye(4)]), LEFT_SHORT)
     # the track fitted fully a step before: both fronts fit as well, the one nearer rest is taken
     np.testing.assert_allclose(tracker.solve_step(FRONT, 1, [np.eye(4)], floor=0.8), PULLED, atol=1e-9)
+    # the front below alone lies farther from rest than the front's own size (RMS radius 13 cm)
+    tracker.fronts = tracker.fronts[1:]
+    np.testing.assert_allclose(tracker.solve_step(FRONT, 1, [np.eye(4)], floor=0.8), LEFT_SHORT)
 
 
 def test_no_alignments_are_tried_while_the_guess_fits_as_the_track_did():
