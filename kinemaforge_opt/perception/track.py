@@ -131,12 +131,6 @@ START_SEPARATION_VOXELS = 0.5
 # unless the images say otherwise.  A shut drawer's front, flush with its frame and hidden, fits
 # about equally a voxel to either side; taking the best of equal fits let it wander ±1 cm at rest.
 FIT_TIE_SIGMAS = 2.0
-# A step whose best result fits (Tracker.fit) more than this share of the points worse than the
-# track's previous pose did is a part that may have moved beyond ICP's reach from every guess
-# (a drawer pulled 13 cm between two samples from rest: from the last pose, ICP tipped its front
-# 0.8 rad onto the drawer's floor, fit 0.55 against 1.0): alignments onto the step's moving
-# clusters are tried too (Tracker.solve_step), if the last pose fitted at least 1 - FIT_DROP.
-FIT_DROP = 0.2
 # ICP stops when an iteration moves the points by less than this share of a voxel.
 ICP_TOLERANCE_VOXELS = 0.05
 # The coarse ICP pass uses every n-th point (it only has to reach the fine basin).
@@ -444,14 +438,11 @@ class Tracker:
         on = self.full_tree(s).query(points, distance_upper_bound=ICP_FINE_VOXELS * self.voxel, workers=-1)[0] < np.inf
         return float(np.mean(cons.astype(bool) & on) - np.mean(viol))
 
-    def solve_step(self, points: np.ndarray, s: int, guesses: list[np.ndarray],
-                   floor: float | None = None) -> np.ndarray | None:
+    def solve_step(self, points: np.ndarray, s: int, guesses: list[np.ndarray]) -> np.ndarray | None:
         """Best verified (4, 4) world motion of (N, 3) reference points to step s, or None
         (module doc): narrow and wide coarse ICP from each distinct guess, the fine pass from each
         distinct coarse pose, and of the acceptable results the best :meth:`fit`; with none,
-        :meth:`redetect`.  floor: when no result fits better than this, the acceptable
-        :meth:`cluster_alignments` that fit at least this well, within the points' RMS radius of
-        the prediction (``guesses[0]``), compete too, after the guesses' results (FIT_DROP)."""
+        :meth:`redetect`."""
         if self.trees[s] is None or len(self.targets[s]) < 3:
             return None
         apart = START_SEPARATION_VOXELS * self.voxel
@@ -471,41 +462,15 @@ class Tracker:
             cons, viol = self.verdicts(moved, s)
             if acceptable(float(np.mean(cons)), float(np.mean(viol))):
                 found.append((T, moved, (cons, viol)))
-        if floor is not None and max((self.fit(f[1], s, f[2]) for f in found), default=-np.inf) < floor:
-            # a rescue fits as the track did (not a step where the part is hidden in part) and lies
-            # within the part's own size of the prediction (a small patch fits any flat surface:
-            # a drawer side's 671 points went onto the body 22 cm away)
-            size = np.sqrt(np.mean(np.sum((points - points.mean(axis=0)) ** 2, axis=1)))
-            found += [f for f in self.cluster_alignments(points, s, guesses[0])
-                      if self.fit(f[1], s, f[2]) >= floor and displacement(f[0], guesses[0], points) <= size]
         if not found:
             return self.redetect(points, s, guesses[0])
         if len(found) == 1:
             return found[0][0]
-        # of the fits within FIT_TIE_SIGMAS of the best, the first in the guesses' order (then the
-        # alignments, nearest the prediction first: stacked drawers' fronts fit alike)
+        # of the fits within FIT_TIE_SIGMAS of the best, the first in the guesses' order
         fits = np.array([self.fit(f[1], s, f[2]) for f in found])
         best = float(fits.max())
         tie = FIT_TIE_SIGMAS * np.sqrt(max(best * (1.0 - best), 0.0) / len(points))
         return next(f[0] for f, x in zip(found, fits) if x >= best - tie)
-
-    def cluster_alignments(self, points: np.ndarray, s: int, prediction: np.ndarray) -> list:
-        """(pose, moved points, their verdicts) of the acceptable ICP results from alignments of
-        (N, 3) reference points onto each moving cluster at step s — its principal axes
-        (:func:`pca_alignments`) or its centroid without a turn (a flat front's axes are not a
-        box's) — nearest the (4, 4) ``prediction`` first."""
-        out = []
-        for cluster in self.moving_clusters(s):
-            shift = np.eye(4)
-            shift[:3, 3] = cluster.mean(axis=0) - points.mean(axis=0)
-            for T0 in pca_alignments(points, cluster) + [shift]:
-                source = self._confirmed(points, s, T0)
-                T = self._fine(source, s, self._coarse(source, s, T0))
-                moved = transform_points(T, points)
-                cons, viol = self.verdicts(moved, s)
-                if acceptable(float(np.mean(cons)), float(np.mean(viol))):
-                    out.append((T, moved, (cons, viol)))
-        return sorted(out, key=lambda f: displacement(f[0], prediction, points))
 
     def redetect(self, points: np.ndarray, s: int, prediction: np.ndarray) -> np.ndarray | None:
         """Principal-axes alignments of (N, 3) reference points onto the moving clusters at step
@@ -546,9 +511,7 @@ class Tracker:
             while 0 <= s < n:
                 # constant velocity first, then the last pose
                 guesses = [_predict(solved), solved[-1]] if len(solved) >= 2 else [solved[-1]]
-                # a track that fitted well and falls is rescued (FIT_DROP); a failing one is not
-                last = self.fit(transform_points(solved[-1], sample), steps[-1])
-                T = self.solve_step(sample, s, guesses, last - FIT_DROP if last >= 1.0 - FIT_DROP else None)
+                T = self.solve_step(sample, s, guesses)
                 s += direction
                 if T is None:
                     continue

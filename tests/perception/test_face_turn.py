@@ -44,11 +44,8 @@ class _Scripted(Tracker):
     def __init__(self, poses: list[np.ndarray]):
         self.poses, self.voxel, self.clouds = poses, VOXEL, [None] * len(poses)
 
-    def solve_step(self, points, s, guesses, floor=None):
+    def solve_step(self, points, s, guesses):
         return self.poses[s]
-
-    def fit(self, points, s, verdicts=None):
-        return 1.0
 
     def grow(self, ref, points, Ts):
         return points
