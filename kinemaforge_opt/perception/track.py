@@ -741,16 +741,16 @@ def carried(by: Proposal, anchor: int, s: int, points: np.ndarray) -> np.ndarray
 
 
 def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
-            steps: np.ndarray) -> tuple[float, list[int]] | None:
-    """(mean share of (N, 3) world points at step ``anchor``, carried by ``by``'s motion to each
-    of ``steps``, that the images confirm minus those they see through; the steps where ``by``'s
-    track failed), or None when the images contradict the carried points (over
+            steps: np.ndarray) -> tuple[np.ndarray, list[int]] | None:
+    """((len(steps),) per step, the share of (N, 3) world points at step ``anchor``, carried by
+    ``by``'s motion to it, that the images confirm minus those they see through; the steps where
+    ``by``'s track failed), or None when the images contradict the carried points (over
     MAX_VIOLATED_SHARE seen through, or fewer than MIN_CONSISTENT_SHARE of the judged ones
     consistent) at a step where ``by``'s pose is acceptable for its own points, or at more than
     1 − COMOVING_SHARE of the steps (module doc, fragments: a contradiction at a step where
     ``by``'s own pose fails the images is its track's failure, not the fragment's, when it is
     one of a few)."""
-    total, failed = 0.0, []
+    shares, failed = [], []
     own = tracking_subset(by.points)
     for s in steps:
         cons, viol = tracker.verify(carried(by, anchor, s, points), int(s))
@@ -761,8 +761,8 @@ def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
             failed.append(int(s))
             if len(failed) > (1.0 - COMOVING_SHARE) * len(steps):
                 return None
-        total += cons - viol
-    return total / len(steps), failed
+        shares.append(cons - viol)
+    return np.array(shares), failed
 
 
 def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) -> tuple[int | None, int | None, list[int]]:
@@ -780,19 +780,23 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
             continue
         xa = transform_points(frag.Ts_delta[a], x)
         sup = support(tracker, xa, p, a, common)
-        if sup is None or sup[0] <= best_support:
+        if sup is None:
+            continue
+        shares, fails = sup
+        mean_support = sum(shares) / len(shares)
+        if mean_support <= best_support:
             continue
         # the images must not tell the two motions apart: at the steps the other track holds,
         # its motion confirms the points nearly as often as the fragment's own (a drawer's points
         # carried by the drawer above it hide in the body, uncontradicted, but unconfirmed)
-        held = [s for s in common if s not in sup[1]]
-        if confirmed(tracker, xa, p, a, held) < confirmed(tracker, xa, frag, a, held) - (1.0 - COMOVING_SHARE):
+        held = ~np.isin(common, fails)  # at most 1 - COMOVING_SHARE of them fail (support)
+        if float(np.mean(shares[held])) < confirmed(tracker, xa, frag, a, common[held]) - (1.0 - COMOVING_SHARE):
             continue
-        best, (best_support, failed), best_anchor = k, sup, a
+        best, best_support, failed, best_anchor = k, mean_support, fails, a
     return best, best_anchor, failed
 
 
-def confirmed(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, steps: list[int]) -> float:
+def confirmed(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, steps: np.ndarray) -> float:
     """Mean over ``steps`` of the share of (N, 3) world points at step ``anchor``, carried by
     ``by``'s motion, that the images confirm minus the share they see through (0 without steps)."""
     shares = [np.subtract(*tracker.verify(carried(by, anchor, s, points), int(s))) for s in steps]
