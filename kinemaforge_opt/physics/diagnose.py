@@ -316,11 +316,12 @@ def diagnose(
     held_out = None
     if held is not None:
         say("predicting the held-out span")
-        held_out = predict_before_after(model, final.model, held, segment_s)
+        held_out = predict_before_after(model, final.model, held, segment_s, workers=workers)
     others = []
     for k, other in enumerate(other_recordings):
         say(f"predicting other recording {k + 1}/{len(other_recordings)}")
-        others.append(predict_before_after(model, final.model, match_recording(model, other), segment_s))
+        others.append(predict_before_after(model, final.model, match_recording(model, other), segment_s,
+                                           workers=workers))
     tested = joined + tuple({"left_out": words} for words in left_out) + tuple(search.tested)
     return Diagnosis(tuple(mismatch), tuple(found), tested, nominal, final, final.model, held_out, tuple(others),
                      held_out_used_for_selection=judged_by_held_out, acceptance_check=acceptance,

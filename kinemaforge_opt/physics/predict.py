@@ -100,41 +100,69 @@ def prediction_signal(h: HeldOut, sigma_q: np.ndarray) -> float:
     return float(np.max(np.sqrt(np.mean((h.q_before - h.q_rec) ** 2, axis=0)) / np.maximum(sigma_q, 1e-12)))
 
 
-def simulate_segments(model: ArticulatedModel, rec: Recording, segment_s: float | None,
-                      extra: dict | None = None, offset_s: float = 0.0) -> np.ndarray:
-    """q (T, n) of ``model`` (plus ``extra`` force laws, see :func:`simulate_recording`) on ``rec``,
-    segment by segment when ``segment_s`` [s] is given, each from its own best state over the
-    first ``STATE_WINDOW_S`` of a segment; NaN over those fitted samples and over a segment too
-    short to estimate a starting state.  offset_s: the segments start this far [s] into the
-    recording (its first ``offset_s`` a segment of its own)."""
+def segment_pieces(rec: Recording, segment_s: float | None, offset_s: float = 0.0) -> list[tuple[np.ndarray, Recording | None]]:
+    """The pieces :func:`simulate_segments` simulates ``rec`` in: per piece (its samples' mask
+    (T,), the piece as a recording, or None when it has fewer than MIN_PIECE_SAMPLES samples).
+    Pieces of ``segment_s`` [s] (one piece without), starting ``offset_s`` [s] into the recording
+    (its first ``offset_s`` a piece of its own); a gap in the recording starts a piece too."""
     edges = [rec.t[0]] if not segment_s else \
         sorted({rec.t[0], *np.arange(rec.t[0] + offset_s, rec.t[-1], segment_s)})
     edges = sorted({*edges, *rec.t[recording_gaps(rec.t) + 1]})  # a gap starts a piece of its own
     edges.append(np.inf)
-    parts = []
+    pieces = []
     for a, b in zip(edges[:-1], edges[1:]):
         m = (rec.t >= a) & (rec.t < b)
-        if m.sum() < MIN_PIECE_SAMPLES:
-            parts.append(np.full((m.sum(), rec.q.shape[1]), np.nan))
-            continue
-        seg = rec.window(rec.t[m][0], rec.t[m][-1])
-        parts.append(simulate_recording(model, seg, extra, state_window_s=STATE_WINDOW_S))
-    return np.vstack(parts)
+        pieces.append((m, rec.window(rec.t[m][0], rec.t[m][-1]) if m.sum() >= MIN_PIECE_SAMPLES else None))
+    return pieces
+
+
+def _simulate_pieces(jobs: list[tuple[ArticulatedModel, list[tuple[np.ndarray, Recording | None]]]],
+                     extra: dict | None, workers: int | None) -> list[np.ndarray]:
+    """Per job (model, :func:`segment_pieces`), q (T, n) of the model simulated piece by piece
+    (:func:`simulate_recording`, each piece from its own best state; NaN over those fitted samples
+    and over a piece too short to simulate).  The pieces of all jobs are independent simulations,
+    run side by side on ``workers`` processes (:func:`~kinemaforge_opt.parallel.process_map`;
+    CVODES holds the GIL)."""
+    from ..parallel import process_map
+
+    todo = [(model, piece) for model, pieces in jobs for _, piece in pieces if piece is not None]
+    done = iter(process_map(lambda mp: simulate_recording(mp[0], mp[1], extra, state_window_s=STATE_WINDOW_S),
+                            todo, workers))
+    out = []
+    for model, pieces in jobs:
+        out.append(np.vstack([next(done) if piece is not None else np.full((int(m.sum()), model.nq), np.nan)
+                              for m, piece in pieces]))
+    return out
+
+
+def simulate_segments(model: ArticulatedModel, rec: Recording, segment_s: float | None,
+                      extra: dict | None = None, offset_s: float = 0.0, workers: int | None = 1) -> np.ndarray:
+    """q (T, n) of ``model`` (plus ``extra`` force laws, see :func:`simulate_recording`) on ``rec``,
+    segment by segment when ``segment_s`` [s] is given, each from its own best state over the
+    first ``STATE_WINDOW_S`` of a segment; NaN over those fitted samples and over a segment too
+    short to estimate a starting state.  offset_s: the segments start this far [s] into the
+    recording (its first ``offset_s`` a segment of its own).  workers: processes simulating the
+    segments side by side (None: :func:`~kinemaforge_opt.parallel.workers`)."""
+    return _simulate_pieces([(model, segment_pieces(rec, segment_s, offset_s))], extra, workers)[0]
 
 
 def predict_before_after(before: ArticulatedModel, after: ArticulatedModel, rec: Recording, segment_s: float | None,
-                         phases: int = 1) -> HeldOut:
+                         phases: int = 1, workers: int | None = 1) -> HeldOut:
     """Simulated q of both models on ``rec`` (:func:`simulate_segments`), scored where both are
     predictions.  phases: with segments, the span is predicted this many times with the segments
     shifted by segment_s / phases, and the predictions pooled (each sample once per phase): an
     event at a segment's start, where the segment's state is fitted and nothing is predicted,
     is then predicted in another phase (a drawer stopped dead 0.05 s before a segment's edge
-    went unseen)."""
+    went unseen).  workers: processes simulating the pieces of both models and every phase side
+    by side (None: :func:`~kinemaforge_opt.parallel.workers`); the predictions do not depend on it."""
+    offsets = [k * segment_s / phases for k in range(phases)] if segment_s else [0.0]
+    models = [before] if after is before else [before, after]
+    jobs = [(m, segment_pieces(rec, segment_s, offset)) for offset in offsets for m in models]
+    q = iter(_simulate_pieces(jobs, None, workers))
     parts = []
-    for k in range(phases if segment_s else 1):
-        offset = k * segment_s / phases if segment_s else 0.0
-        q_b = simulate_segments(before, rec, segment_s, offset_s=offset)
-        q_a = q_b if after is before else simulate_segments(after, rec, segment_s, offset_s=offset)
+    for _ in offsets:
+        q_b = next(q)
+        q_a = q_b if after is before else next(q)
         ok = ~(np.isnan(q_b).any(axis=1) | np.isnan(q_a).any(axis=1))
         parts.append((rec.t[ok], rec.q[ok], q_b[ok], q_a[ok]))
     return HeldOut(*(np.concatenate(x) for x in zip(*parts)))

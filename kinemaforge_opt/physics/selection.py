@@ -503,7 +503,7 @@ class EffectSearch:
             for k, o in enumerate(self.other_recordings):
                 span = match_recording(self.model, o)
                 self.say(f"checking whether other recording {k + 1} can judge effects below the model-form floor")
-                h = predict_before_after(self.nominal_model, self.nominal_model, span, self.segment_s)
+                h = predict_before_after(self.nominal_model, self.nominal_model, span, self.segment_s, workers=self.workers)
                 signal = prediction_signal(h, self.sigma_q)
                 self.judge.setdefault("signal_sigma", {})[f"other_recording_{k + 1}"] = signal
                 if signal >= THRESHOLD_SIGMA:
@@ -513,7 +513,7 @@ class EffectSearch:
 
     def prediction_rms_sigma(self, m: ArticulatedModel, span: Recording) -> float:
         """Noise-normalised RMS of ``m``'s prediction of ``span`` (pooled over joints)."""
-        h = predict_before_after(m, m, span, self.segment_s)
+        h = predict_before_after(m, m, span, self.segment_s, workers=self.workers)
         return float(np.sqrt(np.mean(((h.q_after - h.q_rec) / np.maximum(self.sigma_q, 1e-12)) ** 2)))
 
     def prediction_gate(self, rows: list[dict]) -> dict | None:
@@ -881,7 +881,8 @@ class EffectSearch:
         resting = set() if span.held is None else {j for k, j in enumerate(span.joint_names) if span.held[:, k].all()}
         keys = [key for key in self.chosen() if key[0] not in resting]
         self.say(doing.format(n=len(self.selected)))
-        h = first or predict_before_after(self.nominal_model, self.model_of(self.current), span, span_s, phases)
+        h = first or predict_before_after(self.nominal_model, self.model_of(self.current), span, span_s, phases,
+                                         self.workers)
         if keys and not h.scored:  # no piece long enough to simulate: nothing verifies the selection
             self.tested.append({check: [f"{e} on {j}" for j, e, _ in self.selected], "unscored": True})
             self.dropped.setdefault(f"{stage}_unscored", []).extend(f"{e} on {j}" for j, e, _ in self.selected)
@@ -903,7 +904,8 @@ class EffectSearch:
                 trial = self.trial_of(rest, self.nominal_trial) if rest else self.nominal_trial
                 self.say(f"simulating the fit span without {key[1]} on {key[0]}")
                 after = self.model_of(trial) if rest else self.nominal_model
-                options.append((predict_before_after(self.nominal_model, after, span, span_s, phases), key, trial))
+                options.append((predict_before_after(self.nominal_model, after, span, span_s, phases, self.workers),
+                                key, trial))
             # a removal whose re-fit converged is preferred; one is made in any case
             converged = [o for o in options if o[2].success] or options
             h, (joint, effect), self.current = min(converged, key=lambda o: o[0].rms_after)
@@ -936,7 +938,8 @@ class EffectSearch:
         if held is None or not self.selected:
             return False
         self.say("checking the effects against the held-out span")
-        h = predict_before_after(self.nominal_model, self.model_of(self.current), held, self.segment_s)
+        h = predict_before_after(self.nominal_model, self.model_of(self.current), held, self.segment_s,
+                                 workers=self.workers)
         if not h.scored or np.min(h.joint_gains_sigma(self.sigma_q)) >= -MIN_EFFECT_SIZE_SIGMA:
             return False
         self.drop_until_better(held, self.segment_s, "held_out_check", "prediction_rms",
@@ -965,7 +968,8 @@ class EffectSearch:
             signal = {}
             for name, span in spans:
                 self.say(f"checking whether the {span_words(name)} can judge the effects")
-                h = predict_before_after(self.nominal_model, self.model_of(self.current), span, self.segment_s)
+                h = predict_before_after(self.nominal_model, self.model_of(self.current), span, self.segment_s,
+                                         workers=self.workers)
                 signal[name] = prediction_signal(h, self.sigma_q)
                 if signal[name] < THRESHOLD_SIGMA:
                     continue

@@ -48,6 +48,20 @@ def test_a_door_pressed_onto_its_stop_is_simulated_like_mujoco(door_on_a_stop):
     assert h.rms_before > 5 * NOISE
 
 
+def test_pieces_simulated_side_by_side_give_the_same_prediction(door_on_a_stop):
+    """The pieces of both models and both phases, simulated on two processes, give exactly the
+    prediction simulated in this process, every sample in its place."""
+    model, j, rec = door_on_a_stop
+    rec = between_nominal_stops(model, rec)
+    damped = apply_parameters(model, {f"{j}.damping": np.array([0.5])})
+    alone = predict_before_after(model, damped, rec, 1.0, phases=2, workers=1)
+    side_by_side = predict_before_after(model, damped, rec, 1.0, phases=2, workers=2)
+    assert alone.t.size > rec.t.size  # two phases pooled
+    for field in ("t", "q_rec", "q_before", "q_after"):
+        np.testing.assert_array_equal(getattr(side_by_side, field), getattr(alone, field))
+    assert alone.rms_after < alone.rms_before
+
+
 def test_a_diverging_law_holds_the_last_state_it_reached(door_on_a_stop):
     """A law that drives the speed to infinity in finite time (f = 50 v^3) stops the integrator;
     the simulation keeps the longest prefix it integrated and holds its last state, finite."""

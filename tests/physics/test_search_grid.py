@@ -227,7 +227,7 @@ def test_a_span_in_which_a_joint_rests_throughout_does_not_judge_that_joints_eff
     search.say = lambda *a: None
     search.nominal_model, search.nominal_trial = None, SimpleNamespace(success=True)
     search.model_of = lambda trial: None
-    search.sigma_q = np.array([1e-3])
+    search.sigma_q, search.workers = np.array([1e-3]), 1
 
     def dropped_on(held):
         search.selected = [("door", "coulomb_friction", -100.0)]
