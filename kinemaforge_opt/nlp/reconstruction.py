@@ -839,6 +839,46 @@ def seen_free(data: ScrewData, t_grid: np.ndarray) -> np.ndarray:
     return free
 
 
+def _untouched(dyn_mask: np.ndarray) -> np.ndarray:
+    """(G,) True for each grid column that no free interval (``dyn_mask`` (G − 1,) nonzero) ends at."""
+    out = np.ones(dyn_mask.size + 1, dtype=bool)
+    out[1:] &= dyn_mask == 0
+    out[:-1] &= dyn_mask == 0
+    return out
+
+
+def unseen_hold(data: ScrewData, frame_cols: np.ndarray,
+                reached: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The ``unseen_hold`` cost's entries, or None: (indices into vec(Q) (n, G) column-major,
+    closed-form targets ``data.q_init`` [rad or m], weights [1/rad² or 1/m²]) of each joint's q
+    at each frame where its child part is not seen (:func:`joints_seen`) and no free dynamics
+    interval reaches (``reached`` (G,) True where one does; None: no dynamics term).
+
+    There nothing observes that q directly.  It may still be seen through a descendant, but then
+    only in combination with the descendant's own joint: a drawer's track split into a parent
+    part unseen at the first steps and a child part seen there, on parallel prismatic joints,
+    leaves only their sum observed (protocol_drawer_0@s4: the two ran apart, stage after stage,
+    to −1.6 and +3.2 km, and the written limits with them).  The hold is worth one point on the
+    child at the noise level (weight ℓ²/δ², ℓ = 1 for a slide, the child's RMS radius about its
+    centroid for a turn, as a lever arm): it pins what nothing else observes and gives way to
+    anything that does."""
+    seen = joints_seen(data)
+    joints = data.model.movable_joints
+    ks, ts = np.nonzero(~seen.T)
+    if reached is not None:
+        keep = ~reached[frame_cols[ts]]
+        ks, ts = ks[keep], ts[keep]
+    if ks.size == 0:
+        return None
+    lever = np.ones(len(joints))
+    for k, j in enumerate(joints):
+        if j.type != "prismatic" and j.child in data.surfaces:
+            pts = data.surfaces[j.child].points
+            lever[k] = float(np.sqrt(np.mean(np.sum((pts - pts.mean(axis=0)) ** 2, axis=1))))
+    n = len(joints)
+    return ks + n * frame_cols[ts], data.q_init[ts, ks], lever[ks] ** 2 / data.delta**2
+
+
 def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewState,
                         corr: dict[str, list[Correspondences]] | None, dense: bool,
                         held: frozenset[str] = frozenset(), aligned: dict[str, np.ndarray] | None = None,
@@ -950,9 +990,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             lower[:n, frame_cols] = upper[:n, frame_cols] = q0.T[:, frame_cols]
         # in a stop span or before the parts are seen no term sees v, nor q between frames or at
         # a frame that sees no part: hold them (IPOPT drops them)
-        after = np.ones(G, dtype=bool)  # column c: no free interval (c - 1 or c) touches it
-        after[1:] &= dyn_mask == 0
-        after[:-1] &= dyn_mask == 0
+        after = _untouched(dyn_mask)  # column c: no free interval (c - 1 or c) touches it
         x_init = np.vstack([q0.T, v0.T])
         fixed_states = np.zeros((2 * n, G), dtype=bool)
         fixed_states[n:, after] = True
@@ -1004,6 +1042,10 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             n_vis += int(sum(c.weights.sum() for c in items))
         terms["vis"] = total
     norm = float(max(n_vis, 1))
+    hold = unseen_hold(data, frame_cols, reached=None if not use_dyn else ~_untouched(dyn_mask))
+    if hold is not None:
+        idx, target, weight = hold
+        terms["unseen_hold"] = 0.5 * ca.sumsqr(ca.DM(np.sqrt(weight)) * (ca.vec(Q)[idx.tolist()] - ca.DM(target)))
 
     # --- dyn and energy --------------------------------------------------------------------
     if use_dyn:
@@ -1106,7 +1148,8 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             edges if use_energy else [], e_scale if use_energy else 1.0,
             options.energy_weight / options.energy_sigma**2,
             [(f"axis:{j.name}", f"unit_axis:{j.name}") for j in joints], options.hessian == "gauss_newton",
-            dyn_mask=dyn_mask, energy_mask=e_mask if use_energy else None, prior=prior_fn))
+            dyn_mask=dyn_mask, energy_mask=e_mask if use_energy else None, prior=prior_fn,
+            hold=None if hold is None else (hold[0], hold[2])))
     scales = Normalisation(v_s, a_s, dyn_mask if use_dyn else None, e_scale if use_energy else None)
     return ScrewProblem(prob, data, options, new_state, frame_cols, dyn, tuple(free), use_dyn, n_vis, hess_lag, prior_fn,
                         defects, scales)

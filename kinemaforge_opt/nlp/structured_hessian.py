@@ -49,6 +49,8 @@ class DenseTerms:
     axis variables with their constraint names.  dyn_mask: (G − 1,) 0/1 weight of each interval's
     defect cost (None = all 1).  energy_mask: (windows,) 0/1 weight of each soft window residual.
     prior: Function of the parameter variables (as theta_phi) -> a cost added with cost_weight.
+    hold: (indices into vec(q) (n, G), weights) of a cost ½ Σ w (q − target)² added with
+    cost_weight (``unseen_hold``), or None.
     """
 
     problem: object
@@ -72,6 +74,7 @@ class DenseTerms:
     dyn_mask: np.ndarray | None = None
     energy_mask: np.ndarray | None = None
     prior: ca.Function | None = None
+    hold: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def _scatter(nr: int, nc: int, rows: np.ndarray, cols: np.ndarray, vals: ca.MX) -> ca.MX:
@@ -230,6 +233,14 @@ def lagrangian_hessian(t: DenseTerms) -> ca.Function:
     if t.prior is not None:
         fp = ca.Function("prior_hess", [zs], [ca.densify(ca.hessian(t.prior.expand()(*parts), zs)[0])])
         add_blocks(zidx[None, :], lfw * fp(z))
+
+    # the unseen hold: diagonal, on q entries (row k, column c of q is row k of X's column c)
+    if t.hold is not None:
+        idx, weight = t.hold
+        ix = xoff + nx * (idx // n) + idx % n
+        rows.append(ix)
+        cols.append(ix)
+        vals.append(lfw * ca.DM(weight))
 
     # unit-axis constraints
     for var, con in t.axis_vars:

@@ -19,14 +19,23 @@ def data():
     return pushed_door(60, 6)[1]
 
 
-@pytest.mark.parametrize("energy,impact", [("soft", None), ("hard", None), ("off", None), ("soft", (0.8, np.inf)),
-                                           ("hard", (0.8, np.inf)), ("soft", (0.3, 0.6))])
-def test_assembled_hessian_equals_the_exact_hessian_of_the_lagrangian(data, energy, impact, monkeypatch):
+@pytest.mark.parametrize("energy,impact,unseen", [("soft", None, 0), ("hard", None, 0), ("off", None, 0),
+                                                  ("soft", (0.8, np.inf), 0), ("hard", (0.8, np.inf), 0),
+                                                  ("soft", (0.3, 0.6), 0), ("soft", None, 3)])
+def test_assembled_hessian_equals_the_exact_hessian_of_the_lagrangian(data, energy, impact, unseen, monkeypatch):
     """With ``impact`` (start, end) [s], a stop span is declared there: its intervals and the
     energy windows that touch it leave the objective (masked in both Hessians), the states only
-    it touches are held.  The inertia prior is on in every case."""
+    it touches are held.  With ``unseen`` frames, the door is not seen at the first ones: the
+    dynamics start after them and the ``unseen_hold`` cost holds its q there.  The inertia
+    prior is on in every case."""
+    import dataclasses
+
     import kinemaforge_opt.nlp.reconstruction as reco
 
+    if unseen:
+        data = dataclasses.replace(data, observed={link: [None] * unseen + obs[unseen:] for link, obs in data.observed.items()},
+                                   sightlines=None if data.sightlines is None else
+                                   {link: [None] * unseen + s[unseen:] for link, s in data.sightlines.items()})
     if impact:
         def span(times, q):
             return [(int(np.searchsorted(times, impact[0])), int(min(np.searchsorted(times, impact[1]), times.size - 1)))]
@@ -35,6 +44,7 @@ def test_assembled_hessian_equals_the_exact_hessian_of_the_lagrangian(data, ener
     state = initial_state(data)
     sp = build_screw_problem(data, opts, state, correspondences(data, state, 50), dense=True)
     assert "inertia_prior" in sp.problem.terms["costs"]
+    assert ("unseen_hold" in sp.problem.terms["costs"]) == bool(unseen)
     prob = sp.problem
     names = prob.terms["variables"]
     x = ca.vertcat(*[ca.vec(prob._vars[n].symbol) for n in names])
