@@ -109,7 +109,7 @@ def environment_planes(static_points: np.ndarray, all_points: np.ndarray, thresh
             break
         dist = plane.distance(all_points)
         off = np.abs(dist) > threshold
-        if np.mean(dist[off] < 0) > 0.5:
+        if off.any() and np.mean(dist[off] < 0) > 0.5:  # (no point off the plane: no side to face)
             plane = Plane(-plane.normal, -plane.offset)
             dist = -dist
         if off.any() and np.mean(dist[off] < 0) <= OUTSIDE_SHARE:
