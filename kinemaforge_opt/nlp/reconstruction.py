@@ -315,7 +315,8 @@ class ScrewResult:
     friction / scaled inertia where identified.  q: (T, n) at the observed steps.  terms: name -> value of each term at the end, None for a term switched off:
     ``vis`` the robust sum Σ ρ_δ(r)/δ² over the final correspondences, ``dyn`` the robust sum of
     normalised defects, ``energy`` the soft penalty (× energy_weight) or, for the hard constraint,
-    Σ (relative residual)² over the windows.  iterations: IPOPT iterations over all stages.
+    Σ (relative residual)² over the windows, ``unseen_hold`` (when a part is unseen somewhere,
+    :func:`unseen_hold`) ½ Σ w (q − q_init)² at those frames.  iterations: IPOPT iterations over all stages.
     success: every stage converged (or its continuation did).  stages: per stage (name,
     iterations, success, seconds).
     fitted: the dynamic parameters the NLP fitted ("damping:<joint>", "coulomb:<joint>",
@@ -839,14 +840,6 @@ def seen_free(data: ScrewData, t_grid: np.ndarray) -> np.ndarray:
     return free
 
 
-def _untouched(dyn_mask: np.ndarray) -> np.ndarray:
-    """(G,) True for each grid column that no free interval (``dyn_mask`` (G − 1,) nonzero) ends at."""
-    out = np.ones(dyn_mask.size + 1, dtype=bool)
-    out[1:] &= dyn_mask == 0
-    out[:-1] &= dyn_mask == 0
-    return out
-
-
 def unseen_hold(data: ScrewData, frame_cols: np.ndarray,
                 reached: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The ``unseen_hold`` cost's entries, or None: (indices into vec(Q) (n, G) column-major,
@@ -990,7 +983,9 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             lower[:n, frame_cols] = upper[:n, frame_cols] = q0.T[:, frame_cols]
         # in a stop span or before the parts are seen no term sees v, nor q between frames or at
         # a frame that sees no part: hold them (IPOPT drops them)
-        after = _untouched(dyn_mask)  # column c: no free interval (c - 1 or c) touches it
+        after = np.ones(G, dtype=bool)  # column c: no free interval (c - 1 or c) touches it
+        after[1:] &= dyn_mask == 0
+        after[:-1] &= dyn_mask == 0
         x_init = np.vstack([q0.T, v0.T])
         fixed_states = np.zeros((2 * n, G), dtype=bool)
         fixed_states[n:, after] = True
@@ -1042,7 +1037,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             n_vis += int(sum(c.weights.sum() for c in items))
         terms["vis"] = total
     norm = float(max(n_vis, 1))
-    hold = unseen_hold(data, frame_cols, reached=None if not use_dyn else ~_untouched(dyn_mask))
+    hold = unseen_hold(data, frame_cols, reached=~after if use_dyn else None)
     if hold is not None:
         idx, target, weight = hold
         terms["unseen_hold"] = 0.5 * ca.sumsqr(ca.DM(np.sqrt(weight)) * (ca.vec(Q)[idx.tolist()] - ca.DM(target)))

@@ -64,7 +64,7 @@ def test_the_body_seen_alone_moves_on_its_own_slide_while_the_unseen_front_holds
     hold gives it to the body's slide: the front stays at its closed-form value (0), the body's
     slide carries the whole pull.  At the frames that see both, the points place both."""
     r = refine_screws(_data(), ScrewOptions(dyn=False))
-    q = r.q if r.q.shape == (TIMES.size, 2) else r.state.q
+    q = r.q  # at the frames
     assert q.shape == (TIMES.size, 2)
     np.testing.assert_allclose(q[:, 0] + q[:, 1], PULL, atol=2e-4)  # the body where its points are
     np.testing.assert_allclose(q[:UNSEEN, 0], 0.0, atol=1e-3 * PULL.max())  # the front held
