@@ -5,7 +5,9 @@ A proposal is a cluster of moving points at its reference time r.  Its motion Δ
 frame, ΔT(r) = I, so the track stays anchored to the reference) is solved outward from r, one
 time step at a time, from two guesses: the constant-velocity extrapolation of the neighbouring
 solved poses (a door swinging fast between two samples) and the neighbouring pose itself (a part
-that stops).  From each, ICP runs — with only the points the images confirm at the guess, when
+that stops); and, where a recorded push holds the part, a third: the neighbouring pose moved by
+the grip's displacement between the two samples (:mod:`.grip`: a drawer pulled from rest further
+than ICP reaches).  From each, ICP runs — with only the points the images confirm at the guess, when
 there are enough (a part's far side would pull it onto what lies behind) — a coarse pass (radius
 ICP_COARSE_VOXELS, and a *wide* one starting at WIDE_FACTOR times that: a part that starts,
 stops or changes speed between two samples lands outside the coarse basin of either guess) and a
@@ -111,6 +113,7 @@ from ..parallel import thread_map
 from ..spatial import transform_points
 from .change import MOVING, STATIC, free_space_test, padded_depth
 from .clouds import DepthNoise, TimeCloud, downsample
+from .grip import GripPath
 from .segment import CLUSTER_VOXELS, Plane, clusters
 
 # ICP correspondence radii in voxels: coarse (captures the candidate's basin), then fine.
@@ -355,11 +358,14 @@ class Tracker:
     clouds: the T time steps.  status: per step, (M_t,) STATIC/UNKNOWN/MOVING of its points.
     cameras, noise: for the free-space verification.  voxel: the cloud's voxel edge [m].
     background: the environment planes (:func:`segment.environment_planes`); growing never
-    takes a point within ``plane_band`` [m] of one (None: the fine ICP radius)."""
+    takes a point within ``plane_band`` [m] of one (None: the fine ICP radius).  grip: the
+    recorded push's contact points (:class:`.grip.GripPath`), or None."""
 
     def __init__(self, clouds: list[TimeCloud], status: list[np.ndarray], cameras: dict[str, CameraInfo],
-                 noise: DepthNoise, voxel: float, background: tuple[Plane, ...] = (), plane_band: float | None = None):
+                 noise: DepthNoise, voxel: float, background: tuple[Plane, ...] = (), plane_band: float | None = None,
+                 grip: GripPath | None = None):
         self.clouds, self.status, self.cameras, self.noise, self.voxel = clouds, status, cameras, noise, voxel
+        self.grip = grip
         self.background = background
         self.plane_band = ICP_FINE_VOXELS * voxel if plane_band is None else plane_band
         self.set_targets([c.points[s != STATIC] for c, s in zip(clouds, status)])
@@ -472,6 +478,20 @@ class Tracker:
         tie = FIT_TIE_SIGMAS * np.sqrt(max(best * (1.0 - best), 0.0) / len(points))
         return next(f[0] for f, x in zip(found, fits) if x >= best - tie)
 
+    def grip_guess(self, points: np.ndarray, T: np.ndarray, r: int, s: int) -> np.ndarray | None:
+        """The (4, 4) motion ``T`` of (N, 3) reference points at step r, translated by the grip's
+        displacement from step r to step s (:mod:`.grip`), when the grip holds them: its point
+        within ICP's wide reach of the moved points.  None without a grip on them in that span."""
+        move = None if self.grip is None else self.grip.move(self.clouds[r].t, self.clouds[s].t)
+        if move is None:
+            return None
+        point, shift = move
+        if np.min(np.linalg.norm(transform_points(T, points) - point, axis=1)) > WIDE_FACTOR * ICP_COARSE_VOXELS * self.voxel:
+            return None
+        G = T.copy()
+        G[:3, 3] += shift
+        return G
+
     def redetect(self, points: np.ndarray, s: int, prediction: np.ndarray) -> np.ndarray | None:
         """Principal-axes alignments of (N, 3) reference points onto the moving clusters at step
         s, refined by ICP: of the acceptable ones the (4, 4) world motion nearest the
@@ -509,8 +529,11 @@ class Tracker:
             lead = [sides[0][0][1]] if sides and len(sides[0][0]) > 1 else []
             s = ref + direction
             while 0 <= s < n:
-                # constant velocity first, then the last pose
+                # constant velocity first, then the last pose, then the last pose moved by a grip
                 guesses = [_predict(solved), solved[-1]] if len(solved) >= 2 else [solved[-1]]
+                pulled = self.grip_guess(sample, solved[-1], steps[-1], s)
+                if pulled is not None:
+                    guesses.append(pulled)
                 T = self.solve_step(sample, s, guesses)
                 s += direction
                 if T is None:
