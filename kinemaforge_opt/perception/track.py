@@ -5,9 +5,7 @@ A proposal is a cluster of moving points at its reference time r.  Its motion Δ
 frame, ΔT(r) = I, so the track stays anchored to the reference) is solved outward from r, one
 time step at a time, from two guesses: the constant-velocity extrapolation of the neighbouring
 solved poses (a door swinging fast between two samples) and the neighbouring pose itself (a part
-that stops); and, where a recorded push holds the part, a third: the neighbouring pose moved by
-the grip's displacement between the two samples (:mod:`.grip`: a drawer pulled from rest further
-than ICP reaches).  From each, ICP runs — with only the points the images confirm at the guess, when
+that stops).  From each, ICP runs — with only the points the images confirm at the guess, when
 there are enough (a part's far side would pull it onto what lies behind) — a coarse pass (radius
 ICP_COARSE_VOXELS, and a *wide* one starting at WIDE_FACTOR times that: a part that starts,
 stops or changes speed between two samples lands outside the coarse basin of either guess) and a
@@ -27,8 +25,11 @@ free-space test alone cannot rank them: it confirms a point anywhere within τ =
 reading (several cm at 2 m), ICP matches within 1.5 voxels — a drawer front pulled out 8 cm
 between two samples, which the coarse pass from rest leaves short and tilted 44° about its long
 axis, is still 97 % confirmed with half its points off any surface (the wide pass puts 99 % of
-them on it).  Only when no result is acceptable are principal-axes alignments onto the moving
-clusters at s tried (re-detection).  The images accept every alignment of a symmetric part (a
+them on it).  Only when no result is acceptable is the neighbouring pose moved by a recorded
+push's grip tried, the same way (:mod:`.grip`: a drawer pulled from rest further than ICP reaches;
+as a third guess beside the others its starts found better-fitting but worse door poses on
+Table 1's cabinets), and only then principal-axes alignments onto the moving clusters at s
+(re-detection).  The images accept every alignment of a symmetric part (a
 flat door turned half a turn about its normal covers the same surface), so of the acceptable
 re-detections the one nearest the constant-velocity prediction is kept (:func:`displacement`).
 With no acceptable candidate the proposal is unobserved at s (NaN: occluded or out of view), and
@@ -361,6 +362,8 @@ class Tracker:
     takes a point within ``plane_band`` [m] of one (None: the fine ICP radius).  grip: the
     recorded push's contact points (:class:`.grip.GripPath`), or None."""
 
+    grip: GripPath | None = None
+
     def __init__(self, clouds: list[TimeCloud], status: list[np.ndarray], cameras: dict[str, CameraInfo],
                  noise: DepthNoise, voxel: float, background: tuple[Plane, ...] = (), plane_band: float | None = None,
                  grip: GripPath | None = None):
@@ -444,13 +447,21 @@ class Tracker:
         on = self.full_tree(s).query(points, distance_upper_bound=ICP_FINE_VOXELS * self.voxel, workers=-1)[0] < np.inf
         return float(np.mean(cons.astype(bool) & on) - np.mean(viol))
 
-    def solve_step(self, points: np.ndarray, s: int, guesses: list[np.ndarray]) -> np.ndarray | None:
+    def solve_step(self, points: np.ndarray, s: int, guesses: list[np.ndarray],
+                   pulled: np.ndarray | None = None) -> np.ndarray | None:
         """Best verified (4, 4) world motion of (N, 3) reference points to step s, or None
-        (module doc): narrow and wide coarse ICP from each distinct guess, the fine pass from each
-        distinct coarse pose, and of the acceptable results the best :meth:`fit`; with none,
-        :meth:`redetect`."""
+        (module doc): :meth:`best_start` from the guesses; with no acceptable result, from the
+        ``pulled`` guess (:meth:`grip_guess`), if any; then :meth:`redetect`."""
         if self.trees[s] is None or len(self.targets[s]) < 3:
             return None
+        T = self.best_start(points, s, guesses)
+        if T is None and pulled is not None:
+            T = self.best_start(points, s, [pulled])
+        return T if T is not None else self.redetect(points, s, guesses[0])
+
+    def best_start(self, points: np.ndarray, s: int, guesses: list[np.ndarray]) -> np.ndarray | None:
+        """Narrow and wide coarse ICP from each distinct guess, the fine pass from each distinct
+        coarse pose, and of the acceptable results the best :meth:`fit` (module doc), or None."""
         apart = START_SEPARATION_VOXELS * self.voxel
         starts: list[tuple[np.ndarray, np.ndarray]] = []  # (coarse pose, ICP source)
         for k, T0 in enumerate(guesses):
@@ -469,7 +480,7 @@ class Tracker:
             if acceptable(float(np.mean(cons)), float(np.mean(viol))):
                 found.append((T, moved, (cons, viol)))
         if not found:
-            return self.redetect(points, s, guesses[0])
+            return None
         if len(found) == 1:
             return found[0][0]
         # of the fits within FIT_TIE_SIGMAS of the best, the first in the guesses' order
@@ -529,12 +540,10 @@ class Tracker:
             lead = [sides[0][0][1]] if sides and len(sides[0][0]) > 1 else []
             s = ref + direction
             while 0 <= s < n:
-                # constant velocity first, then the last pose, then the last pose moved by a grip
+                # constant velocity first, then the last pose; where neither verifies, the last
+                # pose moved by a grip
                 guesses = [_predict(solved), solved[-1]] if len(solved) >= 2 else [solved[-1]]
-                pulled = self.grip_guess(sample, solved[-1], steps[-1], s)
-                if pulled is not None:
-                    guesses.append(pulled)
-                T = self.solve_step(sample, s, guesses)
+                T = self.solve_step(sample, s, guesses, self.grip_guess(sample, solved[-1], steps[-1], s))
                 s += direction
                 if T is None:
                     continue

@@ -34,8 +34,8 @@ def _pulled(s: int) -> np.ndarray:
 class _Oracle(Tracker):
     """The front alone at every step; verdicts against its true pose; no re-detection, no growth."""
 
-    def __init__(self, grip: GripPath | None):
-        surfaces = [FRONT + _pulled(s)[:3, 3] for s in range(len(TIMES))]
+    def __init__(self, grip: GripPath | None, moves: bool = True):
+        surfaces = [FRONT + (_pulled(s)[:3, 3] if moves else 0.0) for s in range(len(TIMES))]
         self.voxel, self.grip = VOXEL, grip
         self.clouds = [SimpleNamespace(t=t) for t in TIMES]
         self._trees = [cKDTree(x) for x in surfaces]
@@ -102,3 +102,11 @@ def test_a_grip_on_another_part_gives_no_guess():
     assert tracker.grip_guess(FRONT, np.eye(4), 1, 2) is None
     near = _Oracle(GripPath.of(_wrenches(HANDLE)))
     np.testing.assert_allclose(near.grip_guess(FRONT, np.eye(4), 0, 1), _pulled(1), atol=1e-12)
+
+
+def test_a_hand_sliding_along_a_front_at_rest_moves_nothing():
+    """A hand that slides along the front (its point moves, the front stays): the at-rest guess
+    verifies, and the front stays where the images put it."""
+    still = _Oracle(GripPath.of(_wrenches(HANDLE)), moves=False).track("p0", 0, FRONT)
+    for s in range(len(TIMES)):
+        np.testing.assert_allclose(still.Ts_delta[s], np.eye(4), atol=1e-6)
