@@ -71,7 +71,10 @@ drawer's floor — looks the same under both hypotheses; only seen-through space
 The environment planes (floor, back wall) are never grown into: the floor next to a door's foot
 also slides along itself under the door's rotation or a drawer's pull, and wherever the voxel is
 coarser than the gap between part and floor (a 2.3 cm voxel at 160×120 bridges a door's 2 cm
-clearance) the tie would carry the growth over the whole floor.
+clearance) the tie would carry the growth over the whole floor.  Growing again where the part
+lies farthest from its reference pose finds faces hidden at the reference time (a door's inner
+side); of those points, the ones the images at the reference time see through are dropped: there
+the part is where its points were seen, so a track wrong at the far step put them there.
 
 Fragments: a piece of a part that slides along itself (a drawer's side wall or floor: a flat
 surface moving in its own plane) or hides in the body gives ICP and the free-space test little
@@ -579,7 +582,9 @@ class Tracker:
     def grow_far(self, ref: int, points: np.ndarray, Ts: np.ndarray) -> np.ndarray:
         """(N', 3) ``points`` [m, at ``ref``] plus what :meth:`grow` adds at the observed step
         where the part lies farthest from its reference pose, carried back to ``ref``: a face
-        hidden at the reference time (a door's inner side while it is shut) shows there."""
+        hidden at the reference time (a door's inner side while it is shut) shows there.  Of
+        those, the points the images at ``ref`` see through are left out: at its reference step
+        the part is where its points were seen, so they came from a wrong pose at the far step."""
         obs = [s for s in range(len(Ts)) if s != ref and np.all(np.isfinite(Ts[s])) and len(self.clouds[s].points)]
         if not obs:
             return points
@@ -591,8 +596,10 @@ class Tracker:
         back = np.linalg.inv(Ts[far])
         Ts_far = np.array([T @ back if np.all(np.isfinite(T)) else T for T in Ts])
         moved = points @ Ts[far][:3, :3].T + Ts[far][:3, 3]
-        extra = self.grow(far, moved, Ts_far)[len(moved):]
-        return np.concatenate([points, extra @ back[:3, :3].T + back[:3, 3]])
+        extra = self.grow(far, moved, Ts_far)[len(moved):] @ back[:3, :3].T + back[:3, 3]
+        # at the reference step the part is where its points were seen: a grown point the
+        # cameras saw through there is not on it (the track was wrong at the far step)
+        return np.concatenate([points, extra[self.verdicts(extra, ref)[1] == 0]])
 
     def grow(self, ref: int, points: np.ndarray, Ts: np.ndarray) -> np.ndarray:
         """(N', 3) ``points`` plus the reference cloud's points next to them that the track
