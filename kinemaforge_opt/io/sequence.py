@@ -68,14 +68,6 @@ class Frame:
     depth: str
 
 
-CONTACT_JUMP_M = 0.05
-"""A wrench point moving further than this between two rows starts a new contact [m] (a hand
-moving 5 cm in one row at ≥ 30 Hz would be faster than 1.5 m/s: it let go and grabbed again)."""
-
-FORCE_EPS_N = 1e-9
-"""Rows whose force norm is at most this [N] apply nothing (they end a contact)."""
-
-
 @dataclass(frozen=True, eq=False)
 class Wrenches:
     """Applied forces: t (N,) [s], points_world (N, 3) [m], forces_world (N, 3) [N]."""
@@ -83,22 +75,6 @@ class Wrenches:
     t: np.ndarray
     points_world: np.ndarray
     forces_world: np.ndarray
-
-    def contacts(self) -> list[tuple[int, int]]:
-        """(first, last) row index of each *contact*: a run of rows with a non-zero force whose
-        point moves less than CONTACT_JUMP_M from row to row (one grip)."""
-        active = np.linalg.norm(self.forces_world, axis=1) > FORCE_EPS_N
-        jump = np.r_[True, np.linalg.norm(np.diff(self.points_world, axis=0), axis=1) > CONTACT_JUMP_M]
-        out, start = [], None
-        for r in range(len(self.t)):
-            if start is not None and (not active[r] or jump[r]):
-                out.append((start, r - 1))
-                start = None
-            if active[r] and start is None:
-                start = r
-        if start is not None:
-            out.append((start, len(self.t) - 1))
-        return out
 
 
 @dataclass(frozen=True, eq=False)

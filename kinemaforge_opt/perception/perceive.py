@@ -23,7 +23,6 @@ from .change import MOVING, STATIC, TEST_SIGMAS, motion_status, pixel_status
 from .clouds import (NOISE_IMAGES, VOXEL_FOOTPRINTS, DepthNoise, FrameCloud, TimeCloud, camera_range,
                      downsample, estimate_depth_noise, footprint, frame_cloud, fuse, pixel_stride, static_voxel)
 from .resegment import resegment
-from .grip import GripPath
 from .segment import Plane, environment_planes
 from .track import ICP_FINE_VOXELS, Proposal, Tracker, merge_fragments, observed_steps, propose_and_track
 
@@ -253,7 +252,7 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
     band = environment_band(clouds[mid], noise, radius, averaged=static)
     env = environment_planes(clouds[mid].points[status[mid] == STATIC], clouds[mid].points, band)
     t0 = stage("environment", t0, tick=False)
-    tracker = Tracker(clouds, status, seq.cameras, noise, voxel, tuple(env), band, GripPath.of(seq.wrenches))
+    tracker = Tracker(clouds, status, seq.cameras, noise, voxel, tuple(env), band)
     proposals = _trackable(propose_and_track(tracker), times.size, voxel)
     t0 = stage("proposals+tracks", t0)
     # points that another proposal's motion (or the base) explains better move there; a proposal

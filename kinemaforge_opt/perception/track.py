@@ -25,11 +25,8 @@ free-space test alone cannot rank them: it confirms a point anywhere within τ =
 reading (several cm at 2 m), ICP matches within 1.5 voxels — a drawer front pulled out 8 cm
 between two samples, which the coarse pass from rest leaves short and tilted 44° about its long
 axis, is still 97 % confirmed with half its points off any surface (the wide pass puts 99 % of
-them on it).  Only when no result is acceptable is the neighbouring pose moved by a recorded
-push's grip tried, the same way (:mod:`.grip`: a drawer pulled from rest further than ICP reaches;
-as a third guess beside the others its starts found better-fitting but worse door poses on
-Table 1's cabinets), and only then principal-axes alignments onto the moving clusters at s
-(re-detection).  The images accept every alignment of a symmetric part (a
+them on it).  Only when no result is acceptable are principal-axes alignments onto the moving
+clusters at s tried (re-detection).  The images accept every alignment of a symmetric part (a
 flat door turned half a turn about its normal covers the same surface), so of the acceptable
 re-detections the one nearest the constant-velocity prediction is kept (:func:`displacement`).
 With no acceptable candidate the proposal is unobserved at s (NaN: occluded or out of view), and
@@ -117,7 +114,6 @@ from ..parallel import thread_map
 from ..spatial import transform_points
 from .change import MOVING, STATIC, free_space_test, padded_depth
 from .clouds import DepthNoise, TimeCloud, downsample
-from .grip import GripPath
 from .segment import CLUSTER_VOXELS, Plane, clusters
 
 # ICP correspondence radii in voxels: coarse (captures the candidate's basin), then fine.
@@ -362,16 +358,11 @@ class Tracker:
     clouds: the T time steps.  status: per step, (M_t,) STATIC/UNKNOWN/MOVING of its points.
     cameras, noise: for the free-space verification.  voxel: the cloud's voxel edge [m].
     background: the environment planes (:func:`segment.environment_planes`); growing never
-    takes a point within ``plane_band`` [m] of one (None: the fine ICP radius).  grip: the
-    recorded push's contact points (:class:`.grip.GripPath`), or None."""
-
-    grip: GripPath | None = None
+    takes a point within ``plane_band`` [m] of one (None: the fine ICP radius)."""
 
     def __init__(self, clouds: list[TimeCloud], status: list[np.ndarray], cameras: dict[str, CameraInfo],
-                 noise: DepthNoise, voxel: float, background: tuple[Plane, ...] = (), plane_band: float | None = None,
-                 grip: GripPath | None = None):
+                 noise: DepthNoise, voxel: float, background: tuple[Plane, ...] = (), plane_band: float | None = None):
         self.clouds, self.status, self.cameras, self.noise, self.voxel = clouds, status, cameras, noise, voxel
-        self.grip = grip
         self.background = background
         self.plane_band = ICP_FINE_VOXELS * voxel if plane_band is None else plane_band
         self.set_targets([c.points[s != STATIC] for c, s in zip(clouds, status)])
@@ -450,21 +441,13 @@ class Tracker:
         on = self.full_tree(s).query(points, distance_upper_bound=ICP_FINE_VOXELS * self.voxel, workers=-1)[0] < np.inf
         return float(np.mean(cons.astype(bool) & on) - np.mean(viol))
 
-    def solve_step(self, points: np.ndarray, s: int, guesses: list[np.ndarray],
-                   pulled: np.ndarray | None = None) -> np.ndarray | None:
+    def solve_step(self, points: np.ndarray, s: int, guesses: list[np.ndarray]) -> np.ndarray | None:
         """Best verified (4, 4) world motion of (N, 3) reference points to step s, or None
-        (module doc): :meth:`best_start` from the guesses; with no acceptable result, from the
-        ``pulled`` guess (:meth:`grip_guess`), if any; then :meth:`redetect`."""
+        (module doc): narrow and wide coarse ICP from each distinct guess, the fine pass from each
+        distinct coarse pose, and of the acceptable results the best :meth:`fit`; with none,
+        :meth:`redetect`."""
         if self.trees[s] is None or len(self.targets[s]) < 3:
             return None
-        T = self.best_start(points, s, guesses)
-        if T is None and pulled is not None:
-            T = self.best_start(points, s, [pulled])
-        return T if T is not None else self.redetect(points, s, guesses[0])
-
-    def best_start(self, points: np.ndarray, s: int, guesses: list[np.ndarray]) -> np.ndarray | None:
-        """Narrow and wide coarse ICP from each distinct guess, the fine pass from each distinct
-        coarse pose, and of the acceptable results the best :meth:`fit` (module doc), or None."""
         apart = START_SEPARATION_VOXELS * self.voxel
         starts: list[tuple[np.ndarray, np.ndarray]] = []  # (coarse pose, ICP source)
         for k, T0 in enumerate(guesses):
@@ -483,7 +466,7 @@ class Tracker:
             if acceptable(float(np.mean(cons)), float(np.mean(viol))):
                 found.append((T, moved, (cons, viol)))
         if not found:
-            return None
+            return self.redetect(points, s, guesses[0])
         if len(found) == 1:
             return found[0][0]
         # of the fits within FIT_TIE_SIGMAS of the best, the first in the guesses' order
@@ -491,20 +474,6 @@ class Tracker:
         best = float(fits.max())
         tie = FIT_TIE_SIGMAS * np.sqrt(max(best * (1.0 - best), 0.0) / len(points))
         return next(f[0] for f, x in zip(found, fits) if x >= best - tie)
-
-    def grip_guess(self, points: np.ndarray, T: np.ndarray, r: int, s: int) -> np.ndarray | None:
-        """The (4, 4) motion ``T`` of (N, 3) reference points at step r, translated by the grip's
-        displacement from step r to step s (:mod:`.grip`), when the grip holds them: its point
-        within ICP's wide reach of the moved points.  None without a grip on them in that span."""
-        move = None if self.grip is None else self.grip.move(self.clouds[r].t, self.clouds[s].t)
-        if move is None:
-            return None
-        point, shift = move
-        if np.min(np.linalg.norm(transform_points(T, points) - point, axis=1)) > WIDE_FACTOR * ICP_COARSE_VOXELS * self.voxel:
-            return None
-        G = T.copy()
-        G[:3, 3] += shift
-        return G
 
     def redetect(self, points: np.ndarray, s: int, prediction: np.ndarray) -> np.ndarray | None:
         """Principal-axes alignments of (N, 3) reference points onto the moving clusters at step
@@ -543,10 +512,9 @@ class Tracker:
             lead = [sides[0][0][1]] if sides and len(sides[0][0]) > 1 else []
             s = ref + direction
             while 0 <= s < n:
-                # constant velocity first, then the last pose; where neither verifies, the last
-                # pose moved by a grip
+                # constant velocity first, then the last pose
                 guesses = [_predict(solved), solved[-1]] if len(solved) >= 2 else [solved[-1]]
-                T = self.solve_step(sample, s, guesses, self.grip_guess(sample, solved[-1], steps[-1], s))
+                T = self.solve_step(sample, s, guesses)
                 s += direction
                 if T is None:
                     continue

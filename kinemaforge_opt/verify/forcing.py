@@ -42,9 +42,8 @@ such ambiguity, so it decides:
   step counts as unobserved.
 
 Joint forces (:func:`map_wrenches`).  A wrench row is a force f (N) at a world point p (m) but
-does not say which link it pushes.  The rows are cut into *contacts*
-(:meth:`~kinemaforge_opt.io.sequence.Wrenches.contacts`): runs of non-zero force whose point
-moves less than ``CONTACT_JUMP_M`` between rows.  Each contact is given to the link that
+does not say which link it pushes.  The rows are cut into *contacts*: runs of non-zero force whose
+point moves less than :data:`CONTACT_JUMP_M` between rows.  Each contact is given to the link that
 carries its point best: the smallest ``spread + distance``, where spread is the RMS scatter of p
 expressed in the link's frame over the contact (a grip moves with its link: ~0 on the right link)
 and distance the median distance from p to the link's point cloud (when clouds are given; it
@@ -74,9 +73,16 @@ from ..io.tracks import PoseTracks
 from ..model import ArticulatedModel
 from ..model.pinocchio import build_pin_model
 
+CONTACT_JUMP_M = 0.05
+"""A wrench point moving further than this between two rows starts a new contact [m] (a hand
+moving 5 cm in one row at ≥ 30 Hz would be faster than 1.5 m/s: it let go and grabbed again)."""
+
 CLOUD_POINTS = 20000
 """Points per link cloud used for the wrench-to-link distance (evenly strided; a reconstruction's
 cloud holds millions, and the median distance needs only the surface's extent)."""
+
+FORCE_EPS_N = 1e-9
+"""Rows whose force norm is at most this [N] apply nothing (they end a contact)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -228,6 +234,22 @@ def _revolute_values(R_D: np.ndarray, u: np.ndarray, u0: np.ndarray, axis: np.nd
     return q, np.ones(len(R_D), dtype=bool)
 
 
+def _contacts(w: Wrenches) -> list[tuple[int, int]]:
+    """(first, last) row index of each run of non-zero force with a continuous point."""
+    active = np.linalg.norm(w.forces_world, axis=1) > FORCE_EPS_N
+    jump = np.r_[True, np.linalg.norm(np.diff(w.points_world, axis=0), axis=1) > CONTACT_JUMP_M]
+    out, start = [], None
+    for r in range(len(w.t)):
+        if start is not None and (not active[r] or jump[r]):
+            out.append((start, r - 1))
+            start = None
+        if active[r] and start is None:
+            start = r
+    if start is not None:
+        out.append((start, len(w.t) - 1))
+    return out
+
+
 def _strided(points: np.ndarray, n: int) -> np.ndarray:
     """At most ``n`` of the (N, 3) ``points``, evenly strided (deterministic)."""
     return points if len(points) <= n else points[np.linspace(0, len(points) - 1, n).astype(int)]
@@ -263,7 +285,7 @@ def map_wrenches(
     tau = np.zeros((len(tw), model.nq))
     link_of = np.full(len(tw), None, dtype=object)
     contacts = []
-    for first, last in wrenches.contacts():
+    for first, last in _contacts(wrenches):
         rows = np.arange(first, last + 1)
         local = {name: np.empty((len(rows), 3)) for name in links}
         for r_i, r in enumerate(rows):

@@ -44,7 +44,7 @@ class _Scripted(Tracker):
     def __init__(self, poses: list[np.ndarray]):
         self.poses, self.voxel, self.clouds = poses, VOXEL, [None] * len(poses)
 
-    def solve_step(self, points, s, guesses, pulled=None):
+    def solve_step(self, points, s, guesses):
         return self.poses[s]
 
     def grow(self, ref, points, Ts):
