@@ -6,6 +6,8 @@ The images are an exact oracle at the reference step."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from kinemaforge_opt.perception.track import Tracker
@@ -26,7 +28,7 @@ class _Oracle(Tracker):
 
     def __init__(self, found: np.ndarray):
         self.voxel, self.found = VOXEL, found
-        self.clouds = [type("C", (), {"points": PANEL})()] * 2
+        self.clouds = [SimpleNamespace(points=PANEL)] * 2
 
     def grow(self, ref, points, Ts):
         assert ref == 1
