@@ -111,6 +111,12 @@ def transform_points(T_a_b: np.ndarray, points_b: np.ndarray) -> np.ndarray:
     return P @ T_a_b[:3, :3].T + T_a_b[:3, 3]
 
 
+def rms_radius(points: np.ndarray) -> float:
+    """RMS distance [m] of (N, 3) ``points`` from their centroid (a point set's spread)."""
+    P = np.asarray(points, dtype=float)
+    return float(np.sqrt(np.mean(np.sum((P - P.mean(axis=0)) ** 2, axis=1))))
+
+
 def screw_motion(axis: np.ndarray, point: np.ndarray, angle: float, pitch: float = 0.0) -> np.ndarray:
     """Rigid motion (4, 4) of a screw about the line (point, unit axis): rotate by ``angle`` [rad]
     and translate ``pitch * angle`` [m] along the axis.  ``pitch = inf`` is not allowed; use

@@ -59,6 +59,7 @@ from ..io.sequence import Wrenches
 from ..model import ArticulatedModel, Inertial, JointLimits
 from ..parallel import workers
 from ..physics.effects import EFFECTS
+from ..spatial import rms_radius
 from ..symbolic import build_dynamics
 from .inertial_scales import MIN_COM_SCALE, com_scale, has_axis_ratio, link_axis, scaled_inertial, scaled_parameters
 from .problem import Problem, Result
@@ -866,8 +867,7 @@ def unseen_hold(data: ScrewData, frame_cols: np.ndarray,
     lever = np.ones(len(joints))
     for k, j in enumerate(joints):
         if j.type != "prismatic" and j.child in data.surfaces:
-            pts = data.surfaces[j.child].points
-            lever[k] = float(np.sqrt(np.mean(np.sum((pts - pts.mean(axis=0)) ** 2, axis=1))))
+            lever[k] = rms_radius(data.surfaces[j.child].points)
     n = len(joints)
     return ks + n * frame_cols[ts], data.q_init[ts, ks], lever[ks] ** 2 / data.delta**2
 

@@ -111,7 +111,7 @@ from scipy.spatial import cKDTree
 
 from ..io.sequence import CameraInfo
 from ..parallel import thread_map
-from ..spatial import transform_points
+from ..spatial import rms_radius, transform_points
 from .change import MOVING, STATIC, free_space_test, padded_depth
 from .clouds import DepthNoise, TimeCloud, downsample
 from .segment import CLUSTER_VOXELS, Plane, clusters
@@ -497,7 +497,7 @@ class Tracker:
         Ts[ref] = np.eye(4)
         # a pose farther than ICP reaches from a prediction is a jump, and so is one farther than
         # the fragment's own size: it no longer covers its place at the prediction (module doc)
-        radius = np.sqrt(np.mean(np.sum((sample - sample.mean(axis=0)) ** 2, axis=1)))
+        radius = rms_radius(sample)
         reach = min(WIDE_FACTOR * ICP_COARSE_VOXELS * self.voxel, radius)
         normals = surface_normals(sample)
         # a symmetric part registers turned over as well as not (a flat lid at rest): of a pose
@@ -563,8 +563,8 @@ class Tracker:
             return points
         back = np.linalg.inv(Ts[far])
         Ts_far = np.array([T @ back if np.all(np.isfinite(T)) else T for T in Ts])
-        moved = points @ Ts[far][:3, :3].T + Ts[far][:3, 3]
-        extra = self.grow(far, moved, Ts_far)[len(moved):] @ back[:3, :3].T + back[:3, 3]
+        moved = transform_points(Ts[far], points)
+        extra = transform_points(back, self.grow(far, moved, Ts_far)[len(moved):])
         # at the reference step the part is where its points were seen: a grown point the
         # cameras saw through there is not on it (the track was wrong at the far step)
         return np.concatenate([points, extra[self.verdicts(extra, ref)[1] == 0]])

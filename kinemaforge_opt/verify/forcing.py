@@ -72,6 +72,7 @@ from ..io.sequence import Wrenches
 from ..io.tracks import PoseTracks
 from ..model import ArticulatedModel
 from ..model.pinocchio import build_pin_model
+from ..spatial import rms_radius
 
 CONTACT_JUMP_M = 0.05
 """A wrench point moving further than this between two rows starts a new contact [m] (a hand
@@ -294,7 +295,7 @@ def map_wrenches(
                 local[name][r_i] = data.oMf[fid].actInv(P[r])
         score = {}
         for name in links:
-            spread = float(np.sqrt(np.mean(np.sum((local[name] - local[name].mean(axis=0)) ** 2, axis=1))))
+            spread = rms_radius(local[name])
             dist = 0.0
             if name in trees:  # the point carried back to q = 0, against the link's cloud there
                 p0 = local[name] @ T0[name][:3, :3].T + T0[name][:3, 3]

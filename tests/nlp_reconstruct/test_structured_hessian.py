@@ -3,6 +3,8 @@ problem graph (automatic differentiation of the flat objective and constraints).
 
 from __future__ import annotations
 
+import dataclasses
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -28,8 +30,6 @@ def test_assembled_hessian_equals_the_exact_hessian_of_the_lagrangian(data, ener
     it touches are held.  With ``unseen`` frames, the door is not seen at the first ones: the
     dynamics start after them and the ``unseen_hold`` cost holds its q there.  The inertia
     prior is on in every case."""
-    import dataclasses
-
     import kinemaforge_opt.nlp.reconstruction as reco
 
     if unseen:
