@@ -810,6 +810,26 @@ def confirmed(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, s
     return float(np.mean(shares)) if shares else 0.0
 
 
+def static_explains(tracker: Tracker, frag: Proposal) -> bool:
+    """Whether the base (the identity) explains ``frag``'s points (module doc, fragments): at no
+    step do the images contradict them left in place (over MAX_VIOLATED_SHARE seen through, or
+    fewer than MIN_CONSISTENT_SHARE of the judged ones consistent), and at the steps where
+    ``frag``'s own motion moves them from their place (RMS beyond the fine ICP radius) they are
+    confirmed in place within 1 − COMOVING_SHARE as often as that motion confirms them
+    (:func:`confirmed`; a drawer open at two steps of ten, its shut place hidden behind its
+    front then, is confirmed only by its motion there)."""
+    x = tracking_subset(frag.points)
+    in_place = [tracker.verify(x, s) for s in range(len(frag.Ts_delta))]
+    if any(viol > MAX_VIOLATED_SHARE or cons < MIN_CONSISTENT_SHARE * (cons + viol) for cons, viol in in_place):
+        return False
+    moved = [s for s in np.flatnonzero(np.isfinite(frag.Ts_delta[:, 0, 0]))
+             if displacement(frag.Ts_delta[s], np.eye(4), x) > ICP_FINE_VOXELS * tracker.voxel]
+    if not moved:  # a track that never left the identity
+        return True
+    still = float(np.mean([in_place[s][0] - in_place[s][1] for s in moved]))
+    return still >= confirmed(tracker, x, frag, frag.ref, np.array(moved)) - (1.0 - COMOVING_SHARE)
+
+
 def absorb(p: Proposal, frag: Proposal, anchor: int, failed: list[int] = ()) -> Proposal:
     """``p`` with ``frag``'s points, carried to ``p``'s reference through the ``anchor`` step both
     observe; ``p``'s motion kept (the fragment's own track is the one not trusted) except at the
@@ -895,7 +915,71 @@ def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposa
             if union_fit(tracker, other, frag, frag, a) > union_fit(tracker, other, frag, other, a):
                 out[k] = absorb(frag, without_contradicted(tracker, other, frag, a), a)
             out = [p for p in out if p is not frag]
+        else:
+            pieces = explained_in_pieces(tracker, frag, out)
+            for k, piece, a, failed in pieces or []:
+                if k is not None:  # a base piece is dropped: its points are the base's
+                    out[k] = absorb(out[k], piece, a, failed)
+            if pieces is not None:
+                out = [p for p in out if p is not frag]
     return out
+
+
+def explained_in_pieces(tracker: Tracker, frag: Proposal,
+                        proposals: list[Proposal]) -> list[tuple[int | None, Proposal, int, list[int]]] | None:
+    """The pieces of ``frag`` that other motions explain, when together they leave fewer than
+    ``tracker.min_points`` of the points its own track explains (module doc, fragments: a piece
+    of one drawer that slides along itself, tracked with a strip of the drawer stacked on it),
+    else None.  Each piece is (index of the proposal whose motion explains it, or None for the
+    base; the piece, with ``frag``'s track; anchor step; that proposal's failed steps:
+    :func:`explained_by`, :func:`static_explains`).
+
+    A point is *uncontradicted* by a motion that carries it into seen-through space at no more
+    than 1 − COMOVING_SHARE of the steps (those :func:`support` judges; every step for the base),
+    and goes to the uncontradicted motion under which the images confirm it most (mean of
+    confirmed − seen through per step; of equals — a flat wall sliding along itself is confirmed
+    by any motion along it, a point hidden under every motion by none — the motion nearest
+    ``frag``'s own track, which lags or wanders but follows its part more than any other)."""
+    candidates = []  # (index or None, anchor, (N,) uncontradicted, (N,) mean support, distance)
+    base = Proposal("", frag.ref, frag.points, np.tile(np.eye(4), (len(frag.Ts_delta), 1, 1)))
+    for k, p in [*enumerate(proposals), (None, base)]:
+        common, a = _common_anchor(frag, p)
+        if p is frag or common.size < max(COMOVING_SHARE * observed_steps(frag), 1):
+            continue
+        if k is None:  # the base is judged at every step: it is never unobserved
+            common = np.arange(len(frag.Ts_delta))
+        x = frag.points_at(a)
+        cons, viol = np.sum([tracker.verdicts(carried(p, a, s, x), int(s)) for s in common], axis=0)
+        # how far this motion leads the points from where their own (distrusted) track does
+        away = np.mean([displacement(p.Ts_delta[s] @ np.linalg.inv(p.Ts_delta[a]),
+                                     frag.Ts_delta[s] @ np.linalg.inv(frag.Ts_delta[a]), x)
+                        for s in _common_anchor(frag, p)[0]])
+        candidates.append((k, a, viol <= (1.0 - COMOVING_SHARE) * common.size, (cons - viol) / common.size, away))
+    candidates.sort(key=lambda c: c[4])
+    score = np.array([np.where(c[2], c[3], -np.inf) for c in candidates])
+    best = np.argmax(score, axis=0)
+    left = np.isneginf(score.max(axis=0))
+    pieces = []
+    for i, (k, a, *_) in enumerate(candidates):
+        take = (best == i) & ~left
+        if take.sum() < tracker.min_points:
+            left |= take
+            continue
+        piece = Proposal(frag.name, frag.ref, frag.points[take], frag.Ts_delta)
+        if k is None:
+            explained, failed = static_explains(tracker, piece), []
+        else:
+            explained, _, failed = explained_by(tracker, piece, [proposals[k], piece])
+            explained = explained is not None
+        if explained:
+            pieces.append((k, piece, a, failed))
+        else:
+            left |= take
+    # what no motion explains, its own track included, is no evidence of a part of its own
+    observed = np.flatnonzero(np.isfinite(frag.Ts_delta[:, 0, 0]))
+    seen_through = sum(tracker.verdicts(frag.points_at(int(s)), int(s))[1] for s in observed)
+    own = seen_through <= (1.0 - COMOVING_SHARE) * observed.size
+    return pieces if pieces and np.sum(left & own) < tracker.min_points else None
 
 
 def join(p: Proposal, new: Proposal, anchor: int) -> Proposal:

@@ -34,6 +34,8 @@ def _motion(shift: np.ndarray) -> np.ndarray:
 
 
 PULL = np.outer(0.03 * np.arange(STEPS), [0.0, -1.0, 0.0])  # 3 cm a step along -y
+# the second drawer pushed shut over the first two steps (a part at rest throughout is the base's)
+SHUT = np.outer(0.03 * np.clip(2 - np.arange(STEPS), 0, None), [0.0, -1.0, 0.0])
 # the same, sliding along the front 1 cm a step in +x after the reference step
 SLIDE = PULL + np.outer(0.01 * np.clip(np.arange(STEPS) - REF, 0, None), [1.0, 0.0, 0.0])
 
@@ -44,6 +46,7 @@ class _Oracle(Tracker):
     def __init__(self, surfaces: list[np.ndarray]):
         self.trees = [cKDTree(s) for s in surfaces]
         self.voxel = ON_SURFACE / ICP_FINE_VOXELS * 2.5  # the fine ICP radius: half the fronts' spacing
+        self.min_points = 100  # the smallest part
 
     def _verdicts(self, points, s):
         on = self.trees[s].query(points, distance_upper_bound=ON_SURFACE)[0] < np.inf
@@ -68,16 +71,16 @@ def _air(points: np.ndarray, share: float) -> np.ndarray:
 
 
 def _scene():
-    """The front pulled out along -y, a second drawer's front at rest above it, the front's true
+    """The front pulled out along -y, a second drawer's front above it (shut, then at rest), the front's true
     track, and a duplicate: the front's middle (|x| <= 0.1 m) plus 12 % as many points in the air
     in front of it (seen through at every step), tracked sliding along the front."""
     front, other = _front(0.05), _front(0.3)
-    surfaces = [np.concatenate([front + PULL[s], other]) for s in range(STEPS)]
+    surfaces = [np.concatenate([front + PULL[s], other + SHUT[s]]) for s in range(STEPS)]
     at_ref = front + PULL[REF]
     middle = at_ref[np.abs(at_ref[:, 0]) <= 0.1 + 1e-9]
     true = Proposal("true", REF, at_ref, _motion(PULL))
     dup = Proposal("dup", REF, np.concatenate([middle, _air(middle, 0.12)]), _motion(SLIDE))
-    rest = Proposal("other", REF, other, _motion(np.zeros((STEPS, 3))))
+    rest = Proposal("other", REF, other, _motion(SHUT))
     return _Oracle(surfaces), true, dup, rest
 
 
