@@ -90,7 +90,17 @@ images confirm most is taken.  A second drawer moving at other times puts the po
 in front of the body (seen through) and is no explanation — or inside the body, where nothing
 contradicts them but nothing confirms them either: so the other motion must also confirm the
 points (share confirmed minus share seen through, at the steps its track holds) within
-1 − COMOVING_SHARE of what the proposal's own motion confirms (:func:`confirmed`).
+1 − COMOVING_SHARE of what the proposal's own motion confirms (:func:`confirmed`).  The base is
+such a body too: a proposal whose points the images never contradict left in place, and confirm
+there as often as its own motion does where that motion moves them, is a piece of the body whose
+track wandered along its own surface (:func:`static_explains`; a drawer open at a few steps, its
+shut place hidden behind its front then, is confirmed only by its motion there).  A proposal that
+no one motion explains may hold pieces of several (one drawer's side wall sliding along itself,
+tracked with a strip of the drawer stacked on it): each point goes to the motion, of the other
+proposals' and the base's, that leaves it uncontradicted and under which the images confirm it
+most (to the next best when that motion does not explain the piece it takes); when what no motion
+explains is less than a part — counting only points the proposal's own track does not contradict
+either — the proposal is split among them (:func:`explained_in_pieces`).
 
 Duplicates: a part can be tracked twice, once truly and once by a piece sliding along it (a flat
 door), whose grown points the true motion puts partly in seen-through space, so neither explains
@@ -934,52 +944,67 @@ def explained_in_pieces(tracker: Tracker, frag: Proposal,
     base; the piece, with ``frag``'s track; anchor step; that proposal's failed steps:
     :func:`explained_by`, :func:`static_explains`).
 
-    A point is *uncontradicted* by a motion that carries it into seen-through space at no more
+    A point (of at most MAX_TRACK_POINTS, each of the others taking its nearest one's lot) is
+    *uncontradicted* by a motion that carries it into seen-through space at no more
     than 1 − COMOVING_SHARE of the steps (those :func:`support` judges; every step for the base),
     and goes to the uncontradicted motion under which the images confirm it most (mean of
     confirmed − seen through per step; of equals — a flat wall sliding along itself is confirmed
     by any motion along it, a point hidden under every motion by none — the motion nearest
-    ``frag``'s own track, which lags or wanders but follows its part more than any other)."""
-    candidates = []  # (index or None, anchor, (N,) uncontradicted, (N,) mean support, distance)
+    ``frag``'s own track, which lags or wanders but follows its part more than any other).  When
+    a motion does not explain the piece it takes, or that piece is smaller than a part, those
+    points go to their next best motion, until every piece is explained."""
+    sample = tracking_subset(frag.points)  # judged on the sample; each point takes its nearest's lot
+    nearest = cKDTree(sample).query(frag.points, workers=-1)[1]
+    candidates = []  # (index or None, anchor, (n,) uncontradicted, (n,) mean support, distance)
     base = Proposal("", frag.ref, frag.points, np.tile(np.eye(4), (len(frag.Ts_delta), 1, 1)))
     for k, p in [*enumerate(proposals), (None, base)]:
         common, a = _common_anchor(frag, p)
         if p is frag or common.size < max(COMOVING_SHARE * observed_steps(frag), 1):
             continue
-        if k is None:  # the base is judged at every step: it is never unobserved
-            common = np.arange(len(frag.Ts_delta))
-        x = frag.points_at(a)
-        cons, viol = np.sum([tracker.verdicts(carried(p, a, s, x), int(s)) for s in common], axis=0)
+        x = transform_points(frag.Ts_delta[a], sample)
         # how far this motion leads the points from where their own (distrusted) track does
         away = np.mean([displacement(p.Ts_delta[s] @ np.linalg.inv(p.Ts_delta[a]),
-                                     frag.Ts_delta[s] @ np.linalg.inv(frag.Ts_delta[a]), x)
-                        for s in _common_anchor(frag, p)[0]])
+                                     frag.Ts_delta[s] @ np.linalg.inv(frag.Ts_delta[a]), x) for s in common])
+        if k is None:  # the base is judged at every step: it is never unobserved
+            common = np.arange(len(frag.Ts_delta))
+        cons, viol = np.sum([tracker.verdicts(carried(p, a, s, x), int(s)) for s in common], axis=0)
         candidates.append((k, a, viol <= (1.0 - COMOVING_SHARE) * common.size, (cons - viol) / common.size, away))
     candidates.sort(key=lambda c: c[4])
     score = np.array([np.where(c[2], c[3], -np.inf) for c in candidates])
-    best = np.argmax(score, axis=0)
-    left = np.isneginf(score.max(axis=0))
-    pieces = []
-    for i, (k, a, *_) in enumerate(candidates):
-        take = (best == i) & ~left
-        if take.sum() < tracker.min_points:
-            left |= take
-            continue
-        piece = Proposal(frag.name, frag.ref, frag.points[take], frag.Ts_delta)
-        if k is None:
-            explained, failed = static_explains(tracker, piece), []
-        else:
-            explained, _, failed = explained_by(tracker, piece, [proposals[k], piece])
-            explained = explained is not None
-        if explained:
-            pieces.append((k, piece, a, failed))
-        else:
-            left |= take
     # what no motion explains, its own track included, is no evidence of a part of its own
     observed = np.flatnonzero(np.isfinite(frag.Ts_delta[:, 0, 0]))
-    seen_through = sum(tracker.verdicts(frag.points_at(int(s)), int(s))[1] for s in observed)
-    own = seen_through <= (1.0 - COMOVING_SHARE) * observed.size
-    return pieces if pieces and np.sum(left & own) < tracker.min_points else None
+    seen_through = sum(tracker.verdicts(transform_points(frag.Ts_delta[s], sample), int(s))[1] for s in observed)
+    own = (seen_through <= (1.0 - COMOVING_SHARE) * observed.size)[nearest]
+    verdict = {}  # (candidate, its sample points) -> (explained, failed steps)
+    while True:  # a point whose motion's piece is refused (or smaller than a part) tries its next best
+        best, left = np.argmax(score, axis=0), np.isneginf(score.max(axis=0))
+        if np.sum(left[nearest] & own) >= tracker.min_points:
+            return None
+        pieces, refused = [], None
+        for i, (k, a, *_) in enumerate(candidates):
+            mine = (best == i) & ~left
+            take = mine[nearest]
+            if not mine.any():
+                continue
+            key = (i, mine.tobytes())
+            if key not in verdict:
+                piece = Proposal(frag.name, frag.ref, frag.points[take], frag.Ts_delta)
+                if take.sum() < tracker.min_points:
+                    verdict[key] = (False, [])
+                elif k is None:
+                    verdict[key] = (static_explains(tracker, piece), [])
+                else:
+                    j, _, failed = explained_by(tracker, piece, [proposals[k], piece])
+                    verdict[key] = (j is not None, failed)
+            explained, failed = verdict[key]
+            if not explained:
+                refused = (i, mine)
+                break
+            pieces.append((k, Proposal(frag.name, frag.ref, frag.points[take], frag.Ts_delta), a, failed))
+        if refused is None:
+            break
+        score[refused[0], refused[1]] = -np.inf
+    return pieces or None
 
 
 def join(p: Proposal, new: Proposal, anchor: int) -> Proposal:
