@@ -851,15 +851,24 @@ def absorb(p: Proposal, frag: Proposal, anchor: int, failed: list[int] = ()) -> 
     return Proposal(p.name, p.ref, _points_with(p, frag, anchor), Ts)
 
 
+def verdict_counts(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
+                   steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((N,) confirmed, (N,) seen through): at how many of ``steps`` the images confirm each of
+    (N, 3) world points at step ``anchor``, carried by ``by``'s motion, and only see through it."""
+    cons, viol = np.zeros(len(points), dtype=int), np.zeros(len(points), dtype=int)
+    for s in steps:
+        c, v = tracker.verdicts(carried(by, anchor, s, points), int(s))
+        cons += c
+        viol += v
+    return cons, viol
+
+
 def without_contradicted(tracker: Tracker, q: Proposal, by: Proposal, anchor: int) -> Proposal:
     """``q`` less the points that ``by``'s motion, carried from the ``anchor`` step, puts where the
     images saw through them at more than 1 − COMOVING_SHARE of the steps both observe (what a
     duplicate's wrong track had grown into: no part of the part whose motion is kept)."""
     common = _common_anchor(q, by)[0]
-    x = q.points_at(anchor)
-    seen_through = np.zeros(len(x), dtype=int)
-    for s in common:
-        seen_through += tracker.verdicts(carried(by, anchor, s, x), int(s))[1]
+    seen_through = verdict_counts(tracker, q.points_at(anchor), by, anchor, common)[1]
     keep = seen_through <= (1.0 - COMOVING_SHARE) * common.size
     return Proposal(q.name, q.ref, q.points[keep], q.Ts_delta)
 
@@ -967,13 +976,13 @@ def explained_in_pieces(tracker: Tracker, frag: Proposal,
                                      frag.Ts_delta[s] @ np.linalg.inv(frag.Ts_delta[a]), x) for s in common])
         if k is None:  # the base is judged at every step: it is never unobserved
             common = np.arange(len(frag.Ts_delta))
-        cons, viol = np.sum([tracker.verdicts(carried(p, a, s, x), int(s)) for s in common], axis=0)
+        cons, viol = verdict_counts(tracker, x, p, a, common)
         candidates.append((k, a, viol <= (1.0 - COMOVING_SHARE) * common.size, (cons - viol) / common.size, away))
     candidates.sort(key=lambda c: c[4])
     score = np.array([np.where(c[2], c[3], -np.inf) for c in candidates])
     # what no motion explains, its own track included, is no evidence of a part of its own
     observed = np.flatnonzero(np.isfinite(frag.Ts_delta[:, 0, 0]))
-    seen_through = sum(tracker.verdicts(transform_points(frag.Ts_delta[s], sample), int(s))[1] for s in observed)
+    seen_through = verdict_counts(tracker, sample, frag, frag.ref, observed)[1]
     own = (seen_through <= (1.0 - COMOVING_SHARE) * observed.size)[nearest]
     verdict = {}  # (candidate, its sample points) -> (explained, failed steps)
     while True:  # a point whose motion's piece is refused (or smaller than a part) tries its next best
@@ -987,8 +996,8 @@ def explained_in_pieces(tracker: Tracker, frag: Proposal,
             if not mine.any():
                 continue
             key = (i, mine.tobytes())
+            piece = Proposal(frag.name, frag.ref, frag.points[take], frag.Ts_delta)
             if key not in verdict:
-                piece = Proposal(frag.name, frag.ref, frag.points[take], frag.Ts_delta)
                 if take.sum() < tracker.min_points:
                     verdict[key] = (False, [])
                 elif k is None:
@@ -1000,7 +1009,7 @@ def explained_in_pieces(tracker: Tracker, frag: Proposal,
             if not explained:
                 refused = (i, mine)
                 break
-            pieces.append((k, Proposal(frag.name, frag.ref, frag.points[take], frag.Ts_delta), a, failed))
+            pieces.append((k, piece, a, failed))
         if refused is None:
             break
         score[refused[0], refused[1]] = -np.inf
