@@ -19,7 +19,7 @@ demo: $(STAMP)
 	$(VENV)/bin/kinemaforge demo -o out/demo
 
 # The suite runs in parallel (pytest-xdist), one process per CPU this shell may use, at most 4
-# (memory: each imports Drake, open3d and MuJoCo): 13 -> 7 minutes on CI's 2 cores.
+# (memory: each imports Drake, open3d and MuJoCo): 10 -> 7 minutes on a 2-core machine (docs/NOTES.md).
 TEST_WORKERS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); echo $$(( n < 4 ? n : 4 )))
 TEST_ARGS := -q -n $(TEST_WORKERS)
 
