@@ -816,8 +816,10 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
 def confirmed(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, steps: np.ndarray) -> float:
     """Mean over ``steps`` of the share of (N, 3) world points at step ``anchor``, carried by
     ``by``'s motion, that the images confirm minus the share they see through (0 without steps)."""
-    shares = [np.subtract(*tracker.verify(carried(by, anchor, s, points), int(s))) for s in steps]
-    return float(np.mean(shares)) if shares else 0.0
+    if len(steps) == 0:
+        return 0.0
+    cons, viol = verdict_counts(tracker, points, by, anchor, steps)
+    return float(np.mean(cons - viol)) / len(steps)
 
 
 def static_explains(tracker: Tracker, frag: Proposal) -> bool:
