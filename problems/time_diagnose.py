@@ -10,7 +10,8 @@ length.  Prints per length the wall and CPU time of ``diagnose`` (CPU of this pr
 processes it forked for the hypothesis fits, so BLAS threads and the second core count), the
 samples and the effects it reported; with ``--repeat N`` each length runs N times and the best
 and median wall and CPU are printed (the spread of one machine's timings is often larger than a
-change being measured).  ``--workers 1`` keeps every fit in this process (the default: the
+change being measured; the machine lines before and after, :mod:`problems.machine`, say how fast
+the host let this process run).  ``--workers 1`` keeps every fit in this process (the default: the
 CPUs this process may use).  With ``--profile`` the longest run is profiled by cProfile (this
 process only) and the functions with the most cumulative time are printed.
 """
@@ -23,6 +24,8 @@ import time
 import numpy as np
 
 from kinemaforge_opt.parallel import cpu_seconds
+
+from .machine import machine_line
 
 
 def make_recording(case_name: str, hz: int, seconds: float, noise_seed: int = 0):
@@ -64,6 +67,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     from kinemaforge_opt.physics.diagnose import diagnose
 
+    print(machine_line())
     model, full, effects = make_recording(args.case, args.hz, max(args.lengths), args.noise_seed)
     print(f"{args.case} at {args.hz} Hz; concealed: " + ", ".join(f"{e.type}={e.value:g}" for e in effects))
     for seconds in sorted(args.lengths):
@@ -86,6 +90,7 @@ def main(argv=None) -> int:
         found = ", ".join(f"{e.type}={e.value:.4g}" for e in d.effects) or "nothing"
         print(f"{seconds:5.1f} s, {rec.t.size:5d} samples: wall {_spread(walls)} s, CPU {_spread(cpus)} s"
               f"{f' ({len(walls)} runs)' if len(walls) > 1 else ''}; found {found}")
+    print(machine_line().replace("machine:", "machine after:"))
     if args.profile:
         import pstats
 

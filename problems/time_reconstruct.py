@@ -9,15 +9,13 @@ Generates instance 0 of each category (``problems.eval_perception.instance_case`
 times per object, interleaved, and prints each run's wall, the stages the command itself times
 (reconstruction.json ``timing_s`` and ``verification.timing_s``), and the median over objects of
 each object's best run.  Wall is what a user waits for; the stages leave out the imports
-(~2–4 s).  The machine line (CPU, cores, load) says what the figures were measured on.
+(~2–4 s).  The machine line (CPU, cores, load, a speed probe: :mod:`problems.machine`) says what the figures were measured on.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -27,20 +25,10 @@ from pathlib import Path
 from kinemaforge_opt.synth import generate_case
 
 from .eval_perception import instance_case
+from .machine import machine_line
 
 DEFAULT_CATEGORIES = ("cabinet", "laptop", "microwave", "refrigerator")
 STAGES = ("load", "clouds", "motion", "proposals+tracks", "resegment", "graph", "nlp", "model")
-
-
-def cpu_model() -> str:
-    """The CPU's model name from /proc/cpuinfo (or the platform's processor string)."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def time_run(sequence: Path, out: Path) -> dict:
@@ -64,8 +52,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=2, help="runs per object, interleaved (the best counts)")
     ap.add_argument("--categories", nargs="+", default=list(DEFAULT_CATEGORIES))
     args = ap.parse_args(argv)
-    load = os.getloadavg()[0]
-    print(f"machine: {cpu_model()}, {os.cpu_count()} cores, load {load:.2f} at start")
+    print(machine_line())
     cases = {c: instance_case(c, 0) for c in args.categories}
     for c, case in cases.items():
         root = args.out / "data" / case.name
@@ -83,6 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     per_run = [statistics.median(rs[k]["wall"] for rs in runs.values()) for k in range(args.repeat)]
     print(f"median over objects of the best run: {statistics.median(best.values()):.2f} s "
           f"(median of each round: {', '.join(f'{m:.2f}' for m in per_run)})")
+    print(machine_line().replace("machine:", "machine after:"))
     return 0
 
 
