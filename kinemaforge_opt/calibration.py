@@ -35,6 +35,10 @@ _UNITS = {
 }
 
 
+# The entries of a ``<link>.inertia`` block (Pinocchio's dynamic parameters about the link origin).
+_INERTIA_ENTRIES = ("mass", "m*cx", "m*cy", "m*cz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
+
+
 @dataclass(frozen=True)
 class Estimate:
     """A fitted parameter block: value, nominal (prior) and 95 % interval, element-wise
@@ -196,11 +200,37 @@ def calibrate(
     return dataclasses.replace(cal, identifiability=left_out + cal.identifiability) if left_out else cal
 
 
+def _inertia_unseen_at_nominal(blocks, z: np.ndarray, null_z: np.ndarray) -> np.ndarray:
+    """``z`` (scaled parameters, ``blocks`` order) with its change from the nominal values along
+    the combinations of inertial parameters (``<link>.inertia`` blocks) that the recording cannot
+    determine (``null_z`` (nz, k): :attr:`~kinemaforge_opt.nlp.sensitivity.Sensitivity.null_z`)
+    taken out: the least change from nominal that moves the recorded motion as the fit does.
+
+    The inertial parameters enter the dynamics linearly, so such a combination changes nothing
+    along any motion like the recorded one, and IPOPT leaves it wherever its steps took it: a
+    laptop lid on a fixed hinge, its ten parameters free, came out at 97 kg (its mass alone moves
+    no single hinge) with the gravity torque and the inertia about the hinge it was fitted for.
+    Combinations reaching other parameters (a free swing's damping with its inertia ratio) are
+    nonlinear and are left as fitted; the identifiability words name them."""
+    offsets = np.cumsum([0] + [b.size for b in blocks])
+    inertial = np.zeros(z.size, dtype=bool)
+    for b, o in zip(blocks, offsets):
+        inertial[o: o + b.size] = b.name.endswith(".inertia")
+    N = null_z[:, [k for k in range(null_z.shape[1]) if np.all(np.abs(null_z[~inertial, k]) < 1e-9)]]
+    if not N.shape[1]:
+        return z
+    z0 = np.concatenate([b.nominal / b.scale for b in blocks])
+    dz = z - z0
+    return z0 + dz - N @ np.linalg.lstsq(N, dz, rcond=None)[0]
+
+
 def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: float) -> Calibration:
     model, rec = fit.model, fit.recording
     n = model.nq
     words: list[str] = []
     sens = fit_sensitivity(fit, X, z) if z.size else None
+    if sens is not None:
+        z = _inertia_unseen_at_nominal(fit.blocks, z, sens.null_z)
     # blocks in a combination the data cannot determine ("hinge.axis[tilt 0]" -> "hinge.axis")
     undetermined = {label.split("[")[0] for combo in (sens.unidentifiable if sens else ()) for label in combo}
     estimates, values, offset = {}, {}, 0
@@ -224,8 +254,13 @@ def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: floa
         offset += b.size
     if sens is not None:
         tilts: dict[str, int] = {}  # axis block -> its undetermined directions
+        unseen_inertia: dict[str, list[str]] = {}  # link inertia block -> its undetermined entries
         for combo in sens.unidentifiable:
             blocks = {k.split("[")[0] for k in combo}
+            if len(blocks) == 1 and next(iter(blocks)).endswith(".inertia"):
+                entries = unseen_inertia.setdefault(next(iter(blocks)), [])
+                entries += [_INERTIA_ENTRIES[int(k.split("[")[1][:-1])] for k in combo]
+                continue
             if len(blocks) == 1 and all("[tilt" in k for k in combo):
                 axis = blocks.pop()
                 tilts[axis] = tilts.get(axis, 0) + 1
@@ -234,6 +269,11 @@ def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: floa
             words.append(
                 f"this recording cannot determine the combination {names}: only directions orthogonal to it "
                 "are fitted (e.g. without applied forces, friction and damping are known only relative to inertia)"
+            )
+        for block, entries in unseen_inertia.items():
+            words.append(
+                f"this recording cannot determine {block} in {', '.join(dict.fromkeys(entries))} (alone or combined: "
+                "no motion like the recorded one depends on them); they keep the model's values and the rest is fitted"
             )
         for axis, n_dirs in tilts.items():
             which = "in any direction" if n_dirs > 1 else "in one direction"

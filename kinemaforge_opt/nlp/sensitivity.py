@@ -25,13 +25,16 @@ from .joint_space import JointSpaceFit
 class Sensitivity:
     """cov_z: covariance of the scaled parameters z (in the full z coordinates; axis blocks
     carry their tangent-plane covariance).  unidentifiable: list of {coordinate label: weight}
-    combinations the data cannot determine.  dof: residuals minus parameters."""
+    combinations the data cannot determine.  null_z: (nz, k) those directions in z coordinates
+    (unit columns; the initial-state part of each direction dropped).  dof: residuals minus
+    parameters."""
 
     cov_z: np.ndarray
     labels: tuple[str, ...]
     unidentifiable: tuple[dict[str, float], ...]
     residual_variance: float
     dof: int
+    null_z: np.ndarray
 
 
 def lag1_autocorrelation(residuals: np.ndarray) -> float:
@@ -120,8 +123,12 @@ def fit_sensitivity(fit: JointSpaceFit, X: np.ndarray, z: np.ndarray, rel_tol: f
     keep = w > rel_tol * w.max()
     Fn_inv = (V[:, keep] / w[keep]) @ V[:, keep].T
     cov_r = s2 * Fn_inv / np.outer(d, d)
-    unidentifiable = []
+    unidentifiable, null_z = [], []
     for k in np.where(~keep)[0]:
+        # the direction in reduced coordinates (y = d·r), then in z
+        zdir = P[n_free:, n_free:] @ (V[n_free:, k] / d[n_free:]) if P.shape[1] > n_free else np.zeros(z.size)
+        if np.linalg.norm(zdir) > 0:
+            null_z.append(zdir / np.linalg.norm(zdir))
         vec = V[:, k]
         combo = {labels[i]: float(vec[i]) for i in np.argsort(-np.abs(vec)) if abs(vec[i]) > 0.2 and i >= n_free}
         if combo:
@@ -129,4 +136,5 @@ def fit_sensitivity(fit: JointSpaceFit, X: np.ndarray, z: np.ndarray, rel_tol: f
     # Back to full z coordinates (axis blocks: tangent covariance mapped into 3-D).
     Pz = P[n_free:, n_free:] if P.shape[1] > n_free else np.zeros((z.size, 0))
     cov_z = Pz @ cov_r[n_free:, n_free:] @ Pz.T
-    return Sensitivity(cov_z, tuple(labels), tuple(unidentifiable), s2, dof)
+    null = np.stack(null_z, axis=1) if null_z else np.zeros((z.size, 0))
+    return Sensitivity(cov_z, tuple(labels), tuple(unidentifiable), s2, dof, null)

@@ -431,6 +431,29 @@ def test_calibrate_separates_inertia_and_damping_only_under_a_recorded_force():
 
 
 
+def test_inertial_parameters_no_motion_about_the_hinge_shows_keep_the_models_values():
+    """A rod 1.5 times heavier than the model's, its centre of mass 3 cm off its length, pushed by
+    a recorded torque on a horizontal hinge (Drake's motion), its ten inertial parameters freed.
+    A single hinge shows only the inertia about itself and the first moments across it: those
+    come out as the truth's.  The mass, the first moment along the hinge and the other inertia
+    entries move nothing about this hinge: they keep the model's values (IPOPT had left the mass at
+    162 kg, dynamically the same), and the report names them."""
+    t = np.arange(0.0, 6.0 + 0.5 / RECORD_HZ, 1.0 / RECORD_HZ)
+    tau = (0.3 * np.sin(2 * np.pi * 0.7 * t) * (t < 3.0))[:, None]
+    heavy = _pendulum(0.01, scale=1.5)
+    rod = heavy.link("rod").inertial
+    truth = heavy.with_link("rod", inertial=dataclasses.replace(rod, com=rod.com + np.array([0.0, 0.03, 0.0])))
+    nominal = _pendulum(0.01)
+    cal = calibrate(nominal, _swing(truth, tau), free=["rod.inertia"])
+    value = cal.estimates["rod.inertia"].value  # [m, m cx, m cy, m cz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz] at the hinge
+    seen, unseen = [2, 3, 4], [0, 1, 5, 6, 7, 8, 9]  # m cy, m cz, Ixx about the hinge (x); the rest
+    assert value[seen] == pytest.approx(truth.link("rod").inertial.dynamic_parameters()[seen], rel=0.01)
+    np.testing.assert_allclose(value[unseen], nominal.link("rod").inertial.dynamic_parameters()[unseen], atol=1e-9)
+    assert cal.model.link("rod").inertial.mass == pytest.approx(1.0)
+    (words,) = cal.identifiability
+    assert "cannot determine rod.inertia in" in words and "mass" in words and "Izz" in words, words
+
+
 def test_a_horizontal_hinge_whose_tilt_the_swing_cannot_show_is_reported_undetermined():
     """A rod swinging on a horizontal hinge, the hinge's axis freed: turning the axis about the
     vertical is a symmetry of gravity, and tilting it out of the horizontal weakens gravity by
