@@ -200,28 +200,50 @@ def calibrate(
     return dataclasses.replace(cal, identifiability=left_out + cal.identifiability) if left_out else cal
 
 
-def _inertia_unseen_at_nominal(blocks, z: np.ndarray, null_z: np.ndarray) -> np.ndarray:
-    """``z`` (scaled parameters, ``blocks`` order) with its change from the nominal values along
-    the combinations of inertial parameters (``<link>.inertia`` blocks) that the recording cannot
-    determine (``null_z`` (nz, k): :attr:`~kinemaforge_opt.nlp.sensitivity.Sensitivity.null_z`)
-    taken out: the least change from nominal that moves the recorded motion as the fit does.
+def _undetermined_inertia(blocks, z: np.ndarray, null_z: np.ndarray) -> np.ndarray:
+    """``z`` (scaled parameters, ``blocks`` order) with the combinations of each ``<link>.inertia``
+    block that the recording cannot determine (``null_z`` (nz, k), the directions
+    :attr:`~kinemaforge_opt.nlp.sensitivity.Sensitivity.null_z` lying within that block) chosen
+    anew: the physical body nearest the model's (least log-det divergence of its pseudo-inertia,
+    :func:`~kinemaforge_opt.nlp.inverse_dynamics.entropic_divergence`, over log-Cholesky
+    parameters, so it stays physical) among those with the determined part as fitted.
 
     The inertial parameters enter the dynamics linearly, so such a combination changes nothing
     along any motion like the recorded one, and IPOPT leaves it wherever its steps took it: a
-    laptop lid on a fixed hinge, its ten parameters free, came out at 97 kg (its mass alone moves
-    no single hinge) with the gravity torque and the inertia about the hinge it was fitted for.
-    Combinations reaching other parameters (a free swing's damping with its inertia ratio) are
-    nonlinear and are left as fitted; the identifiability words name them."""
+    laptop lid on a fixed hinge, its ten parameters free, came out at 97 kg and a rod at 162 kg
+    (the mass alone moves no single hinge), dynamically the same.  Nor is the model's own value
+    of such a combination always right: a rod whose hinge shows more first moment than the model's
+    mass can carry at that inertia needs more mass to be a body at all.  If no physical body has the
+    determined part (noise at the boundary), the least change from the model's values is taken.
+    Combinations reaching other blocks (a free swing's damping with its inertia ratio) are left
+    as fitted; the identifiability words name them."""
+    import casadi as ca
+    from scipy.linalg import null_space
+
+    from .nlp.inverse_dynamics import dynamic_from_log_cholesky, entropic_divergence, log_cholesky_from_dynamic
+
+    z = z.copy()
     offsets = np.cumsum([0] + [b.size for b in blocks])
-    inertial = np.zeros(z.size, dtype=bool)
     for b, o in zip(blocks, offsets):
-        inertial[o: o + b.size] = b.name.endswith(".inertia")
-    N = null_z[:, [k for k in range(null_z.shape[1]) if np.all(np.abs(null_z[~inertial, k]) < 1e-9)]]
-    if not N.shape[1]:
-        return z
-    z0 = np.concatenate([b.nominal / b.scale for b in blocks])
-    dz = z - z0
-    return z0 + dz - N @ np.linalg.lstsq(N, dz, rcond=None)[0]
+        sl = slice(o, o + b.size)
+        own = [k for k in range(null_z.shape[1])
+               if b.name.endswith(".inertia") and np.linalg.norm(np.delete(null_z[:, k], np.arange(o, o + b.size))) < 1e-9]
+        if not own:
+            continue
+        N = null_z[sl, own]  # (10, k): what the recording cannot see, in this block's scaled coordinates
+        Q = null_space(N.T)  # (10, 10 - k): what it determines
+        x = ca.SX.sym("x", 10)
+        x0 = log_cholesky_from_dynamic(b.nominal)
+        seen = ca.mtimes(ca.DM(Q.T), dynamic_from_log_cholesky(x) / ca.DM(b.scale)) - ca.DM(Q.T @ z[sl])
+        solver = ca.nlpsol("nearest_body", "ipopt", {"x": x, "f": entropic_divergence(x, x0), "g": seen},
+                           {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": 1e-10})
+        sol = solver(x0=x0, lbg=0.0, ubg=0.0)
+        if solver.stats()["success"]:
+            z[sl] = dynamic_from_log_cholesky(np.asarray(sol["x"]).ravel()) / b.scale
+        else:
+            dz = z[sl] - b.nominal / b.scale
+            z[sl] = b.nominal / b.scale + dz - N @ np.linalg.lstsq(N, dz, rcond=None)[0]
+    return z
 
 
 def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: float) -> Calibration:
@@ -230,7 +252,7 @@ def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: floa
     words: list[str] = []
     sens = fit_sensitivity(fit, X, z) if z.size else None
     if sens is not None:
-        z = _inertia_unseen_at_nominal(fit.blocks, z, sens.null_z)
+        z = _undetermined_inertia(fit.blocks, z, sens.null_z)
     # blocks in a combination the data cannot determine ("hinge.axis[tilt 0]" -> "hinge.axis")
     undetermined = {label.split("[")[0] for combo in (sens.unidentifiable if sens else ()) for label in combo}
     estimates, values, offset = {}, {}, 0
@@ -273,7 +295,8 @@ def _result(fit: JointSpaceFit, res, X: np.ndarray, z: np.ndarray, elapsed: floa
         for block, entries in unseen_inertia.items():
             words.append(
                 f"this recording cannot determine {block} in {', '.join(dict.fromkeys(entries))} (alone or combined: "
-                "no motion like the recorded one depends on them); they keep the model's values and the rest is fitted"
+                "no motion like the recorded one depends on them): they are those of the physical body nearest the "
+                "model's that has the rest as fitted"
             )
         for axis, n_dirs in tilts.items():
             which = "in any direction" if n_dirs > 1 else "in one direction"
