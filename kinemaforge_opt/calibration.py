@@ -171,6 +171,9 @@ def calibrate(
     not cross (:func:`~kinemaforge_opt.nlp.joint_space.join_recordings`); ``Calibration.recording``
     and ``q_fit`` are then on that joined time axis.
     on_iteration: called with (IPOPT iteration, objective) after each iteration (a progress bar).
+    What the recording cannot determine of a freed ``<link>.inertia`` (on one hinge: the mass, the
+    first moment along it, the inertia about other axes) is that of the physical body nearest the
+    model's with the rest as fitted; ``identifiability`` names those entries.
     Raises for bad input (unknown names, missing joints, no motion) before any work starts.
     """
     if method not in ("collocation", "inverse_dynamics"):
