@@ -224,25 +224,28 @@ def _undetermined_inertia(blocks, z: np.ndarray, null_z: np.ndarray) -> np.ndarr
     from scipy.linalg import null_space
 
     from .nlp.inverse_dynamics import dynamic_from_log_cholesky, entropic_divergence, log_cholesky_from_dynamic
+    from .nlp.problem import Problem
 
     z = z.copy()
     offsets = np.cumsum([0] + [b.size for b in blocks])
     for b, o in zip(blocks, offsets):
+        if not b.name.endswith(".inertia"):
+            continue
         sl = slice(o, o + b.size)
-        own = [k for k in range(null_z.shape[1])
-               if b.name.endswith(".inertia") and np.linalg.norm(np.delete(null_z[:, k], np.arange(o, o + b.size))) < 1e-9]
+        own = [k for k in range(null_z.shape[1]) if np.linalg.norm(np.delete(null_z[:, k], np.arange(o, o + b.size))) < 1e-9]
         if not own:
             continue
         N = null_z[sl, own]  # (10, k): what the recording cannot see, in this block's scaled coordinates
         Q = null_space(N.T)  # (10, 10 - k): what it determines
-        x = ca.SX.sym("x", 10)
         x0 = log_cholesky_from_dynamic(b.nominal)
-        seen = ca.mtimes(ca.DM(Q.T), dynamic_from_log_cholesky(x) / ca.DM(b.scale)) - ca.DM(Q.T @ z[sl])
-        solver = ca.nlpsol("nearest_body", "ipopt", {"x": x, "f": entropic_divergence(x, x0), "g": seen},
-                           {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": 1e-10})
-        sol = solver(x0=x0, lbg=0.0, ubg=0.0)
-        if solver.stats()["success"]:
-            z[sl] = dynamic_from_log_cholesky(np.asarray(sol["x"]).ravel()) / b.scale
+        prob = Problem("nearest_body")
+        x = prob.variable("log_cholesky", 10, init=x0)
+        prob.add_cost("divergence", entropic_divergence(x, x0))
+        prob.add_constraint("determined", ca.mtimes(ca.DM(Q.T), dynamic_from_log_cholesky(x) / ca.DM(b.scale))
+                            - ca.DM(Q.T @ z[sl]))
+        res = prob.solve(tol=1e-10)
+        if res.success:
+            z[sl] = dynamic_from_log_cholesky(np.asarray(res.values["log_cholesky"]).ravel()) / b.scale
         else:
             dz = z[sl] - b.nominal / b.scale
             z[sl] = b.nominal / b.scale + dz - N @ np.linalg.lstsq(N, dz, rcond=None)[0]

@@ -51,8 +51,8 @@ def speed_probe(samples: int = 40) -> tuple[float, float]:
     return 1e3 * float(t.min()), float(np.mean(t > 1.5 * t.min()))
 
 
-def machine_line() -> str:
-    """"machine: CPU, N cores, load L, speed probe P ms, S % slowed" (see the module docs)."""
+def machine_line(label: str = "machine") -> str:
+    """"<label>: CPU, N cores, load L, speed probe P ms, S % slowed" (see the module docs)."""
     fastest, slowed = speed_probe()
-    return (f"machine: {cpu_model()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}, speed probe "
+    return (f"{label}: {cpu_model()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}, speed probe "
             f"{fastest:.1f} ms, {100 * slowed:.0f} % of its timings slowed by more than 1.5x")

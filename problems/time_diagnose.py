@@ -90,7 +90,7 @@ def main(argv=None) -> int:
         found = ", ".join(f"{e.type}={e.value:.4g}" for e in d.effects) or "nothing"
         print(f"{seconds:5.1f} s, {rec.t.size:5d} samples: wall {_spread(walls)} s, CPU {_spread(cpus)} s"
               f"{f' ({len(walls)} runs)' if len(walls) > 1 else ''}; found {found}")
-    print(machine_line().replace("machine:", "machine after:"))
+    print(machine_line("machine after"))
     if args.profile:
         import pstats
 

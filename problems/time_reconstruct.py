@@ -9,7 +9,8 @@ Generates instance 0 of each category (``problems.eval_perception.instance_case`
 times per object, interleaved, and prints each run's wall, the stages the command itself times
 (reconstruction.json ``timing_s`` and ``verification.timing_s``), and the median over objects of
 each object's best run.  Wall is what a user waits for; the stages leave out the imports
-(~2–4 s).  The machine line (CPU, cores, load, a speed probe: :mod:`problems.machine`) says what the figures were measured on.
+(~2–4 s).  The machine lines before and after (CPU, cores, load, a speed probe:
+:mod:`problems.machine`) say what the figures were measured on.
 """
 
 from __future__ import annotations
@@ -70,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     per_run = [statistics.median(rs[k]["wall"] for rs in runs.values()) for k in range(args.repeat)]
     print(f"median over objects of the best run: {statistics.median(best.values()):.2f} s "
           f"(median of each round: {', '.join(f'{m:.2f}' for m in per_run)})")
-    print(machine_line().replace("machine:", "machine after:"))
+    print(machine_line("machine after"))
     return 0
 
 
