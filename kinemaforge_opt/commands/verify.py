@@ -21,8 +21,7 @@ With RECORDING.csv: start Drake from the recording's first state, apply its reco
   energy_residual  |ΔE − W_applied − W_dissipative| / scale over the recording's spans in
                which no joint moves into one of its stops or is pressed past one (a stop's
                work is in no model term; resting on a stop or leaving it is booked), a
-               dimensionless ratio
-               (0 = the model's energy books balance on the data).
+               dimensionless ratio (0 = the model's energy books balance on the data).
 Without a recording: a conservative check.  Damping and friction are removed, the model
 starts mid-range with 1 rad/s (0.1 m/s for sliders) and its energy must stay constant.
 
