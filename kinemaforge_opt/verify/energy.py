@@ -139,18 +139,22 @@ def free_segments(model: ArticulatedModel, q: np.ndarray, v: np.ndarray | None =
     return out
 
 
+def _towards_nearer_limit(model: ArticulatedModel, q: np.ndarray) -> np.ndarray:
+    """(T, n) +1 where a joint at ``q`` (T, n) is nearer its upper limit, −1 nearer its lower one,
+    0 for a joint without finite limits: a velocity times it is positive towards the nearer stop."""
+    out = np.zeros_like(q)
+    for j, joint in enumerate(model.movable_joints):
+        lim = joint.limits
+        if lim is not None and np.isfinite(lim.lower) and np.isfinite(lim.upper):
+            out[:, j] = np.where(q[:, j] > 0.5 * (lim.lower + lim.upper), 1.0, -1.0)
+    return out
+
+
 def _speed_into_limit(model: ArticulatedModel, q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """(T, n) [rad/s or m/s] the part of each joint's velocity ``v`` (T, n) that points towards the
     nearer of its limits at ``q`` (T, n), zero where it points away (or the joint has no finite
     limits)."""
-    out = np.zeros_like(v)
-    for j, joint in enumerate(model.movable_joints):
-        lim = joint.limits
-        if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
-            continue
-        towards = np.where(q[:, j] > 0.5 * (lim.lower + lim.upper), 1.0, -1.0)  # + : the upper limit
-        out[:, j] = np.maximum(towards * v[:, j], 0.0)
-    return out
+    return np.maximum(_towards_nearer_limit(model, q) * v, 0.0)
 
 
 def arrival_speed(model: ArticulatedModel, q: np.ndarray, t: np.ndarray, sample_t: np.ndarray) -> np.ndarray:
@@ -164,18 +168,13 @@ def arrival_speed(model: ArticulatedModel, q: np.ndarray, t: np.ndarray, sample_
     energy residual read 0.16 where the true model on the same motion reads 0.03)."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     sample_t = np.asarray(sample_t, dtype=float)
-    out = np.zeros_like(q)
     k = np.clip(np.searchsorted(sample_t, t, side="right") - 1, 0, len(sample_t) - 2)
-    for j, joint in enumerate(model.movable_joints):
-        lim = joint.limits
-        if lim is None or not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
-            continue
-        qs = np.interp(sample_t, t, q[:, j])
-        speed = np.diff(qs) / np.diff(sample_t)  # (S-1,) mean speed of each measured interval
-        towards = np.where(q[:, j] > 0.5 * (lim.lower + lim.upper), 1.0, -1.0)  # + : the upper limit
-        before = speed[np.maximum(k - 1, 0)]
-        out[:, j] = np.maximum(np.maximum(towards * speed[k], towards * before), 0.0)
-    return out
+    qs = np.empty((len(sample_t), q.shape[1]))
+    for j in range(q.shape[1]):
+        qs[:, j] = np.interp(sample_t, t, q[:, j])
+    speed = np.diff(qs, axis=0) / np.diff(sample_t)[:, None]  # (S-1, n) mean speed of each measured interval
+    towards = _towards_nearer_limit(model, q)
+    return np.maximum(np.maximum(towards * speed[k], towards * speed[np.maximum(k - 1, 0)]), 0.0)
 
 
 def energy_residual(model: ArticulatedModel, recording: Recording, stop_tolerance: float = STOP_TOLERANCE,
