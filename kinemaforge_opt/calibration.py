@@ -35,7 +35,8 @@ _UNITS = {
 }
 
 
-# The entries of a ``<link>.inertia`` block (Pinocchio's dynamic parameters about the link origin).
+# The entries of a ``<link>.inertia`` block as the identifiability words spell them: Pinocchio's
+# dynamic parameters about the link origin (model.pinocchio.DYNAMIC_PARAMETER_NAMES, same order).
 _INERTIA_ENTRIES = ("mass", "m*cx", "m*cy", "m*cz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 
 

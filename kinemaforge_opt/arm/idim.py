@@ -19,15 +19,14 @@ import scipy.signal
 from ..errors import DataError
 from ..io.recording import Recording
 from ..model import ArticulatedModel
-from ..model.pinocchio import build_pin_model
+from ..model.pinocchio import DYNAMIC_PARAMETER_NAMES, build_pin_model
 
-_INERTIAL_NAMES = ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 _JOINT_TERMS = ("armature", "viscous", "coulomb", "offset")
 
 
 def parameter_names(joint_names) -> list[str]:
     """Names of the columns of :func:`identification_regressor` (body i rides on joint i)."""
-    names = [f"{j}.{p}" for j in joint_names for p in _INERTIAL_NAMES]
+    names = [f"{j}.{p}" for j in joint_names for p in DYNAMIC_PARAMETER_NAMES]
     return names + [f"{j}.{term}" for term in _JOINT_TERMS for j in joint_names]
 
 

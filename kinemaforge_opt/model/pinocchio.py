@@ -15,6 +15,10 @@ import pinocchio as pin
 
 from .articulated import ArticulatedModel
 
+#: Names of a body's ten dynamic parameters in Pinocchio's order (``Inertia.toDynamicParameters``):
+#: mass, first moment m·c, inertia about the body origin (lower triangle, row by row).
+DYNAMIC_PARAMETER_NAMES = ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
+
 
 def _joint_model(joint):
     a = np.asarray(joint.axis, dtype=float)

@@ -58,6 +58,7 @@ from ..calibration import _UNITS, Calibration, Estimate, apply_parameters
 from ..errors import DataError, UnknownNameError
 from ..io.recording import Recording
 from ..model.articulated import ArticulatedModel
+from ..model.pinocchio import DYNAMIC_PARAMETER_NAMES
 from ..physics.effects import EFFECTS
 from ..symbolic import build_dynamics
 from .joint_space import active_effects, data_scales, stretches
@@ -71,7 +72,6 @@ PRIOR_WIDTH = 1.0
 BASE_RTOL = 1e-6
 #: Force parameters fitted here, each entering the torque linearly, and the effect they belong to.
 _FORCE_FIELDS = {"damping": "viscous_damping", "coulomb": "coulomb_friction", "bias": "constant_bias"}
-_INERTIA_LABELS = ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 
 
 # --- log-Cholesky parameterisation of the pseudo-inertia -----------------------------------
@@ -387,7 +387,7 @@ def _passive(model: ArticulatedModel, forces, blocks, z, q, v):
 def _labels(blocks) -> list[str]:
     out = []
     for b in blocks:
-        out += [f"{b.name}[{l}]" for l in _INERTIA_LABELS] if b.name.endswith(".inertia") else [b.name]
+        out += [f"{b.name}[{l}]" for l in DYNAMIC_PARAMETER_NAMES] if b.name.endswith(".inertia") else [b.name]
     return out
 
 

@@ -123,18 +123,18 @@ def fit_sensitivity(fit: JointSpaceFit, X: np.ndarray, z: np.ndarray, rel_tol: f
     keep = w > rel_tol * w.max()
     Fn_inv = (V[:, keep] / w[keep]) @ V[:, keep].T
     cov_r = s2 * Fn_inv / np.outer(d, d)
+    # reduced parameter coordinates -> full z coordinates (axis blocks: tangent plane into 3-D)
+    Pz = P[n_free:, n_free:] if P.shape[1] > n_free else np.zeros((z.size, 0))
     unidentifiable, null_z = [], []
     for k in np.where(~keep)[0]:
         # the direction in reduced coordinates (y = d·r), then in z
-        zdir = P[n_free:, n_free:] @ (V[n_free:, k] / d[n_free:]) if P.shape[1] > n_free else np.zeros(z.size)
+        zdir = Pz @ (V[n_free:, k] / d[n_free:])
         if np.linalg.norm(zdir) > 0:
             null_z.append(zdir / np.linalg.norm(zdir))
         vec = V[:, k]
         combo = {labels[i]: float(vec[i]) for i in np.argsort(-np.abs(vec)) if abs(vec[i]) > 0.2 and i >= n_free}
         if combo:
             unidentifiable.append(combo)
-    # Back to full z coordinates (axis blocks: tangent covariance mapped into 3-D).
-    Pz = P[n_free:, n_free:] if P.shape[1] > n_free else np.zeros((z.size, 0))
     cov_z = Pz @ cov_r[n_free:, n_free:] @ Pz.T
     null = np.stack(null_z, axis=1) if null_z else np.zeros((z.size, 0))
     return Sensitivity(cov_z, tuple(labels), tuple(unidentifiable), s2, dof, null)

@@ -73,15 +73,13 @@ def at_stop(model: ArticulatedModel, q: np.ndarray, tolerance: float = STOP_TOLE
     return out
 
 
-def joint_kinetic_energy(model: ArticulatedModel, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(T, n) ½ M_jj(q) v_j² [J]: the kinetic energy of motion along each joint alone (what an
-    impact on that joint's stop can take out, at most, when the others do not move)."""
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    v = np.atleast_2d(np.asarray(v, dtype=float))
+def _joint_inertias(model: ArticulatedModel, q: np.ndarray) -> np.ndarray:
+    """(T, n) M_jj(q) [kg·m² or kg]: each joint's own diagonal entry of the mass matrix at the
+    states ``q`` (T, n); ½ M_jj v_j² is the kinetic energy of motion along that joint alone (what
+    an impact on its stop can take out, at most, when the others do not move)."""
     pm = build_pin_model(model)
     data = pm.createData()
-    diag = np.array([np.diag(pin.crba(pm, data, qi)) for qi in q]).reshape(q.shape)
-    return 0.5 * diag * v**2
+    return np.array([np.diag(pin.crba(pm, data, qi)) for qi in q]).reshape(q.shape)
 
 
 def free_segments(model: ArticulatedModel, q: np.ndarray, v: np.ndarray | None = None,
@@ -90,14 +88,15 @@ def free_segments(model: ArticulatedModel, q: np.ndarray, v: np.ndarray | None =
     """Maximal runs [a, b] (sample indices, b > a) of the samples ``q``, ``v`` (T, n) in which no
     interval may hold a stop's impact: an interval is out when, at either of its ends, a joint is
     on a stop (:func:`at_stop`) while moving *into* it (towards the limit it is at) with more than
-    ``tolerance`` × the motion's kinetic-energy span (max − min over the samples;
-    :func:`joint_kinetic_energy`), or strictly past a limit (a compliant stop pressed in stores
-    energy and gives it back as the joint springs out).  A stop's force does work only while the
-    joint moves into it or, pressed in, back out: a joint that rests on its stop (a closed door
-    while the other one swings) or leaves it (a door pushed open from shut) takes none.  Cutting a
-    push's start out of the books left them to begin mid-push, where a spline through
-    camera-rate samples is least accurate (protocol_cabinet_1@s1's reconstruction: residual 0.150
-    with the departure cut, 0.015 with it kept).  Without ``v``, finite differences of q.
+    ``tolerance`` × the motion's kinetic-energy span (max − min over the samples of
+    Σ_j ½ M_jj v_j², :func:`_joint_inertias`), or strictly past a limit (a compliant stop pressed
+    in stores energy and gives it back as the joint springs out).  A stop's force does work only
+    while the joint moves into it or, pressed in, back out: a joint that rests on its stop (a
+    closed door while the other one swings) or leaves it (a door pushed open from shut) takes
+    none.  Cutting a push's start out of the books left them to begin mid-push, where a spline
+    through camera-rate samples is least accurate (protocol_cabinet_1@s1's reconstruction:
+    residual 0.150 with the departure cut, 0.015 with it kept).  Without ``v``, finite
+    differences of q.
 
     t (T,) [s] and sample_t (S,) [s]: when q, v interpolate coarser measured samples at the times
     ``sample_t``, every measured interval that holds an interval out, and its two neighbours,
@@ -110,12 +109,12 @@ def free_segments(model: ArticulatedModel, q: np.ndarray, v: np.ndarray | None =
     past = at_stop(model, q, -1e-6)  # beyond a limit (by more than numerical jitter)
     if stop.any():
         v = np.gradient(q, axis=0) if v is None else np.atleast_2d(np.asarray(v, dtype=float))
-        ek = joint_kinetic_energy(model, q, v)
-        floor = tolerance * (float(np.ptp(ek.sum(axis=1))) if len(q) > 1 else 0.0)
-        ek_into = joint_kinetic_energy(model, q, _speed_into_limit(model, q, v))
+        half_m = 0.5 * _joint_inertias(model, q)  # kinetic energy per (speed along the joint)²
+        floor = tolerance * (float(np.ptp((half_m * v**2).sum(axis=1))) if len(q) > 1 else 0.0)
+        into = _speed_into_limit(model, q, v)
         if sample_t is not None and t is not None and len(sample_t) > 1:
-            ek_into = np.maximum(ek_into, joint_kinetic_energy(model, q, arrival_speed(model, q, t, sample_t)))
-        stop &= ek_into > floor
+            into = np.maximum(into, arrival_speed(model, q, t, sample_t))
+        stop &= half_m * into**2 > floor
     hit = (stop | past).any(axis=1)
     free = ~(hit[1:] | hit[:-1])  # interval i: samples i -> i + 1
     if sample_t is not None and t is not None and not free.all():
