@@ -192,6 +192,7 @@ def drift_vs_true_model(case_root: Path, out_dir: Path, scores, est: list[JointR
     replay = read_recording(out_dir / "replay.csv")  # its Drake replay (times on rec's clock)
     doc = json.loads((out_dir / "reconstruction.json").read_text())
     t_zero = float(doc["verification"]["zero_step_t_s"])
+    zero_t = doc["verification"].get("joint_zero_t_s", {})  # a joint whose child was unseen at t_zero
     from ..verify.energy import model_ordered
 
     true_model = read_urdf(case_root / "ground_truth" / "true_model.urdf")
@@ -217,7 +218,7 @@ def drift_vs_true_model(case_root: Path, out_dir: Path, scores, est: list[JointR
         e = next(x for x in est if x.name == j.name)
         sign = 1.0 if float(np.dot(e.axis_world, true_axis[tj])) >= 0 else -1.0
         kt = true_names.index(tj)
-        q_zero = np.interp(t_zero, mj.t, mj.q[:, kt])
+        q_zero = np.interp(zero_t.get(j.name, t_zero), mj.t, mj.q[:, kt])
         q_ref[:, k] = sign * (truth.q[:, kt] - q_zero)
     q_sim = replay.q[-t_out.size:]
     err = _link_point_error(model, q_sim, q_ref)

@@ -89,6 +89,63 @@ class PoseTracks:
         return T
 
 
+@dataclass(frozen=True, eq=False)
+class ZeroConfiguration:
+    """Where a kinematic tree's links are at q = 0, from the tracks that follow them.
+
+    step: the time step the zero configuration is taken at (the first at which the most moving
+    links are seen).  poses: link -> (4, 4) pose T_world_track of its track at q = 0 (identity
+    for the root).  steps: link -> the time step at which its pose relative to its parent was
+    taken: ``step`` where it and its parent are seen then, else the nearest step at which both
+    are (its joint's q is 0 at that step, not at ``step``)."""
+
+    step: int
+    poses: dict[str, np.ndarray]
+    steps: dict[str, int]
+
+
+def zero_configuration(tracks: PoseTracks, reps: dict[str, int | None], parent: dict[str, str]) -> ZeroConfiguration:
+    """The :class:`ZeroConfiguration` of a tree whose links follow the tracks ``reps`` (link ->
+    track index, None for the root, which is the world) with ``parent`` (moving link -> parent link).
+
+    Every link's zero pose is its parent's composed with the relative pose of the two tracks at
+    one time step, so q = 0 is always a configuration the object took.  Where every moving link
+    is seen at one step this is simply their poses at the first such step.  Where none sees them
+    all (a part tracked in two halves, a drawer hidden while another is seen) a link unseen at
+    ``step`` takes its relative pose at the nearest step that sees it with its parent
+    (protocol_drawer_0@s6: five tracks for three drawers, two of them seen at steps 0-9 and
+    10-19 only, had stopped the reconstruction).  Raises :class:`DataError` naming the link when
+    it is never seen together with its parent."""
+    obs = tracks.observed()
+    T = tracks.times.size
+    moving = [link for link, k in reps.items() if k is not None]
+    count = sum(obs[reps[link]].astype(int) for link in moving) if moving else np.zeros(T, dtype=int)
+    step = int(np.argmax(count))
+    poses = {link: np.eye(4) for link, k in reps.items() if k is None}
+    steps: dict[str, int] = {}
+    todo = list(moving)
+    while todo:
+        ready = [link for link in todo if parent[link] in poses]
+        if not ready:
+            raise DataError(f"link(s) {', '.join(map(repr, todo))}: no path of tracked parents to the root")
+        for link in ready:
+            kp = reps[parent[link]]
+            both = obs[reps[link]] & (obs[kp] if kp is not None else True)
+            if not both.any():
+                raise DataError(f"link {link!r} is never seen together with its parent {parent[link]!r}: "
+                                "their relative pose, and so the joint between them, is unknown")
+            s = int(np.flatnonzero(both)[np.argmin(np.abs(np.flatnonzero(both) - step))])
+            T_link = tracks.Ts_world_track(reps[link])[s]
+            if s == step and (kp is None or steps[parent[link]] == step):
+                poses[link] = T_link  # the parent is where its track was at this step
+            else:
+                T_parent = np.eye(4) if kp is None else tracks.Ts_world_track(kp)[s]
+                poses[link] = poses[parent[link]] @ np.linalg.inv(T_parent) @ T_link
+            steps[link] = s
+            todo.remove(link)
+    return ZeroConfiguration(step, poses, steps)
+
+
 def _field_float(path: Path, row: int, field: str, text: str) -> float:
     try:
         value = float(text)

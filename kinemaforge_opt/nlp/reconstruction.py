@@ -554,7 +554,7 @@ def vis_value(data: ScrewData, state: ScrewState, corr: dict[str, list[Correspon
     return float(total)
 
 
-def _ancestors(model: ArticulatedModel, link: str) -> list[int]:
+def ancestor_joints(model: ArticulatedModel, link: str) -> list[int]:
     """Indices (in movable-joint order) of the movable joints from the root to ``link``."""
     names = model.joint_names
     parent_joint = {j.child: j for j in model.joints}
@@ -576,7 +576,7 @@ def _applied_force(model, dyn, theta, axis_of, pitch_of, q, p, f, sel, pushed: l
     tau = [ca.SX(0)] * n
     joints = model.movable_joints
     for i, link in enumerate(pushed):
-        for k in _ancestors(model, link):
+        for k in ancestor_joints(model, link):
             j = joints[k]
             c = model.link_names.index(j.child)
             R, o = P[4 * c : 4 * c + 3, :3], P[4 * c : 4 * c + 3, 3]

@@ -26,11 +26,11 @@ from ..graph import infer_tree
 from ..graph.tree import GraphResult
 from ..io.atomic import atomic_path, write_text_atomic
 from ..io.sequence import load_sequence
-from ..io.tracks import PoseTracks
+from ..io.tracks import PoseTracks, ZeroConfiguration, zero_configuration
 from ..model import ArticulatedModel, Geometry, Inertial, Joint, JointLimits, Link, write_urdf
 from ..nlp.gravity_aligned import face_directions
-from ..nlp.reconstruction import (ScrewData, ScrewOptions, ScrewResult, joints_seen, refine_screws, stop_limits,
-                                  unseen_carried_on, with_ratios)
+from ..nlp.reconstruction import (ScrewData, ScrewOptions, ScrewResult, ancestor_joints, joints_seen, refine_screws,
+                                  stop_limits, transforms_world0_t, unseen_carried_on, with_ratios)
 from ..nlp.visual import surface_model
 from ..parallel import thread_map
 from ..spatial import inverse, make_transform
@@ -203,11 +203,11 @@ class Reconstruction:
     labels: list[np.ndarray]
 
 
-def _zero_step(tracks: PoseTracks, reps: list[int]) -> int:
-    obs = tracks.observed()[reps].all(axis=0)
-    if not obs.any():
-        raise DataError("no time step sees every moving part at once; a zero configuration needs one")
-    return int(np.argmax(obs))
+def _zero_configuration(tracks: PoseTracks, tree) -> ZeroConfiguration:
+    """The tree's zero configuration (:func:`~kinemaforge_opt.io.tracks.zero_configuration`) with
+    each moving part following its representative track."""
+    reps = {p: _representative(m, tracks) for p, m in tree.parts.items() if p != tree.root}
+    return zero_configuration(tracks, {tree.root: None, **reps}, {j.child: j.parent for j in tree.joints})
 
 
 def _representative(members: tuple[str, ...], tracks: PoseTracks) -> int:
@@ -231,13 +231,11 @@ class JointLine:
 
 
 def closed_form_lines(per: Perception, graph: GraphResult) -> dict[str, JointLine]:
-    """The graph's closed-form joints as :class:`JointLine` s (zero configuration = first step at
-    which every moving part is seen)."""
+    """The graph's closed-form joints as :class:`JointLine` s (zero configuration: the first step
+    at which every moving part is seen, or :func:`_zero_configuration` where none sees them all)."""
     tracks, tree = per.tracks, graph.best
-    reps = {p: _representative(m, tracks) for p, m in tree.parts.items() if p != tree.root}
-    s0 = _zero_step(tracks, list(reps.values()))
-    T_world_track0 = {p: tracks.Ts_world_track(k)[s0] for p, k in reps.items()}
-    T_world_track0[tree.root] = np.eye(4)
+    zero = _zero_configuration(tracks, tree)
+    T_world_track0 = zero.poses
     lines = {}
     for j in tree.joints:
         h = j.hypothesis
@@ -247,10 +245,10 @@ def closed_form_lines(per: Perception, graph: GraphResult) -> dict[str, JointLin
         origin = (T_wp[:3, :3] @ h.origin_parent + T_wp[:3, 3]) if h.origin_parent is not None else T_world_track0[j.child][:3, 3]
         # q from the graph is 0 at the pair's first common sample (h.times: the samples of the
         # tracks it was fitted on, which need not be this part's representative); shift it to
-        # the zero step
+        # the step the child's zero pose was taken at
         common = np.isin(tracks.times, h.times)
         q = np.full(tracks.times.size, np.nan)
-        q[common] = np.asarray(h.q, dtype=float) - np.interp(tracks.times[s0], h.times, h.q)
+        q[common] = np.asarray(h.q, dtype=float) - np.interp(tracks.times[zero.steps[j.child]], h.times, h.q)
         lines[j.name] = JointLine(jtype, axis, origin, float(h.pitch) if jtype == "helical" else 0.0, q)
     return lines
 
@@ -295,10 +293,8 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
     lines = closed_form_lines(per, graph) if lines is None else lines
     part_of = track_parts(graph, tracks)
     reps = {p: _representative(m, tracks) for p, m in tree.parts.items() if p != tree.root}
-    s0 = _zero_step(tracks, list(reps.values()))
     T_world_link0 = {tree.root: np.eye(4)}  # link frames at the zero configuration
-    T_world_track0 = {p: tracks.Ts_world_track(k)[s0] for p, k in reps.items()}
-    T_world_track0[tree.root] = np.eye(4)
+    T_world_track0 = _zero_configuration(tracks, tree).poses
     joints, records = [], []
     for j in tree.joints:
         h, line = j.hypothesis, lines[j.name]
@@ -397,14 +393,37 @@ def screw_data(per: Perception, seq, model: ArticulatedModel, lines: dict[str, J
     # fused surface stopped at 1.4° axis error, on the zero-step surface at 0.14°).  The NLP
     # re-fuses every step with its own motion later (ScrewOptions.refuse).
     s0 = int(np.argmin(np.abs(q0).sum(axis=1)))
-    surfaces = {p: surface_model(observed[p][s0], per.voxel, p, sightlines=sightlines[p][s0]) if len(observed[p][s0]) >= 50
-                else surface_model(clouds_world[p], per.voxel, p) for p in moving}
+    own = {p: _own_zero_step(model, p, q0, s0) for p in moving}
+    surfaces = {p: _surface_at_zero(model, p, q0[own[p]], observed[p][own[p]], sightlines[p][own[p]], per.voxel)
+                if len(observed[p][own[p]]) >= 50 else surface_model(clouds_world[p], per.voxel, p) for p in moving}
     w = seq.wrenches
     pushed = pushed_links(model, per.times, q0, w, clouds_world) if w is not None else None
     if w is not None and not any(pushed):
         w, pushed = None, None
     return ScrewData(model, per.times, q0, observed, surfaces, delta=per.voxel, gate=2 * per.inlier_distance,
                      wrenches=w, pushed_link=pushed, sightlines=sightlines, faces=parent_faces(model, clouds_world, per.voxel))
+
+
+def _own_zero_step(model: ArticulatedModel, part: str, q0: np.ndarray, s0: int) -> int:
+    """The time step at which the joints from the root to ``part`` are nearest zero in q0 (T, n):
+    ``s0`` where they are all 0 there (every part seen at one step), else the step where their
+    summed |q| is least (a part whose zero pose was taken at another step than its neighbours',
+    :func:`~kinemaforge_opt.io.tracks.zero_configuration`)."""
+    chain = ancestor_joints(model, part)
+    if not np.any(q0[s0, chain]):
+        return s0
+    return int(np.argmin(np.abs(q0[:, chain]).sum(axis=1)))
+
+
+def _surface_at_zero(model: ArticulatedModel, part: str, q: np.ndarray, points: np.ndarray, sightlines: np.ndarray,
+                     voxel: float):
+    """``part``'s surface model at q = 0 from its ``points`` (M, 3) [m] and unit ``sightlines``
+    (M, 3) seen at the joint values ``q`` (n,), moved back by the closed-form motion when the joints
+    from the root to it are not at zero there."""
+    if np.any(q[ancestor_joints(model, part)]):
+        T = np.linalg.inv(transforms_world0_t(model, part, q[None])[0])
+        points, sightlines = points @ T[:3, :3].T + T[:3, 3], sightlines @ T[:3, :3].T
+    return surface_model(points, voxel, part, sightlines=sightlines)
 
 
 def parent_faces(model: ArticulatedModel, clouds_world: dict[str, np.ndarray], spacing: float) -> dict[str, np.ndarray]:

@@ -5,19 +5,23 @@ Joint values (:func:`joint_values`).  Each link of the model is followed by one 
 pose track: of the tracks listed for it (``reconstruction.json`` ``links[].tracks``), the one
 observed most often (the first such in the list on ties); the root link stays at the world frame.
 The *zero step* s0 is the first time step at which every moving link's representative is
-observed (the reconstruction's convention: q = 0 there).  For a joint from parent P to child C,
-with T_world_P(t), T_world_C(t) the representatives' poses (identity for the root),
+observed (the reconstruction's convention: q = 0 there); where no step sees them all, a link
+unseen at s0 takes its zero pose from the nearest step that sees it with its parent
+(:func:`~kinemaforge_opt.io.tracks.zero_configuration`; its joint is 0 there).  For a joint from
+parent P to child C, with T_world_P(t), T_world_C(t) the representatives' poses (identity for
+the root) and T_world_P⁰, T_world_C⁰ their poses at q = 0,
 
-    M(t) = T_world_P(t)⁻¹ T_world_C(t),    D(t) = M(t) M(s0)⁻¹   (the child's motion since s0,
-                                                                  expressed in P's track frame)
-    a_P = R_world_P(s0)ᵀ a_world                                 (the joint axis in that frame)
+    M(t) = T_world_P(t)⁻¹ T_world_C(t),    D(t) = M(t) M⁰⁻¹   (the child's motion since q = 0,
+                                                               expressed in P's track frame;
+                                                               M⁰ = (T_world_P⁰)⁻¹ T_world_C⁰)
+    a_P = (R_world_P⁰)ᵀ a_world                               (the joint axis in that frame)
     revolute / helical:  q(t) = twist of R_D(t) about a_P, on the branch its position gives   [rad]
-    prismatic:           q(t) = (p_M(t) − p_M(s0)) · a_P                                        [m]
+    prismatic:           q(t) = (p_M(t) − p_M⁰) · a_P                                          [m]
 
 with a_world the joint axis in the world at q = 0 (forward kinematics of the model).  Steps at
 which a joint's two tracks are not both observed are filled by linear interpolation in time and
-reported.  The values span the steps from the first at which every joint is measured to the last:
-before and after, a value could only be held, and a held value is no measurement (a door whose
+reported.  The values span the steps from the first at which every joint is measured to the last
+(where no step measures them all, those that measure the most): before and after, a value could only be held, and a held value is no measurement (a door whose
 track starts late, pushed open while it was near shut, held at its first tracked angle under the
 push's force, replayed 6.6 cm off within a second).
 
@@ -69,7 +73,7 @@ from scipy.spatial.transform import Rotation
 from ..errors import DataError
 from ..io.recording import Recording
 from ..io.sequence import Wrenches
-from ..io.tracks import PoseTracks
+from ..io.tracks import PoseTracks, zero_configuration
 from ..model import ArticulatedModel
 from ..model.pinocchio import build_pin_model
 from ..spatial import rms_radius
@@ -94,7 +98,9 @@ class JointValues:
     model's movable joints (q order).
     q: (T, n) joint values [rad or m], q = 0 at the zero step.  observed: (T, n) bool, False
     where the value was filled by interpolation.  zero_step: index of s0.
-    representatives: link name -> the track that follows it (None for the root)."""
+    representatives: link name -> the track that follows it (None for the root).
+    zero_t: joint name -> the time [s] at which it is 0 (s0's, but where its child is unseen at
+    s0, the step its zero pose was taken at: module docs)."""
 
     t: np.ndarray
     joint_names: tuple[str, ...]
@@ -102,6 +108,7 @@ class JointValues:
     observed: np.ndarray
     zero_step: int
     representatives: dict[str, str | None]
+    zero_t: dict[str, float]
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,9 +149,10 @@ def joint_values(model: ArticulatedModel, tracks: PoseTracks, link_tracks: Mappi
     """q per track time step for every movable joint of ``model`` (module docs).
 
     link_tracks: link name -> the names of the tracks that move with it (the root's may be
-    omitted).  Raises :class:`DataError` naming the link or joint when a moving link has no
-    track, tracks have no orientation, no step sees every moving link, or a joint is seen at
-    fewer than two steps."""
+    omitted).  The zero configuration is :func:`~kinemaforge_opt.io.tracks.zero_configuration`'s
+    (the reconstruction's).  Raises :class:`DataError` naming the link or joint when a moving
+    link has no track, tracks have no orientation, a link is never seen with its parent, or a
+    joint is seen at fewer than two steps."""
     if not tracks.has_orientation:
         raise DataError("joint values need full-pose tracks (x,y,z,qx,qy,qz,qw); these are position-only")
     root = model.root.name
@@ -156,12 +164,8 @@ def joint_values(model: ArticulatedModel, tracks: PoseTracks, link_tracks: Mappi
         reps[link] = _representative(tracks, link_tracks[link], link)
     obs = tracks.observed()
     T = tracks.times.size
-    seen = np.ones(T, dtype=bool)
-    for link in moving:
-        seen &= obs[reps[link]]
-    if not seen.any():
-        raise DataError("no time step sees every moving link's track at once; the zero configuration needs one")
-    s0 = int(np.argmax(seen))
+    zero = zero_configuration(tracks, reps, {j.child: j.parent for j in model.joints})
+    s0 = zero.step
 
     def poses(link: str) -> tuple[np.ndarray, np.ndarray]:
         k = reps.get(link)
@@ -185,29 +189,32 @@ def joint_values(model: ArticulatedModel, tracks: PoseTracks, link_tracks: Mappi
                             f"at {int(ok.sum())} time step(s); at least 2 are needed")
         idx = np.flatnonzero(ok)
         M = np.linalg.inv(Tp[idx]) @ Tc[idx]
-        M0 = np.linalg.inv(Tp[s0]) @ Tc[s0]
-        a_P = Tp[s0][:3, :3].T @ a_world
+        M0 = np.linalg.inv(zero.poses[j.parent]) @ zero.poses[j.child]  # the child in its parent at q = 0
+        a_P = zero.poses[j.parent][:3, :3].T @ a_world
         if j.type == "prismatic":
             qi = (M[:, :3, 3] - M0[:3, 3]) @ a_P
         else:
-            c_P = (np.linalg.inv(Tp[s0]) @ np.r_[data.oMi[jid].translation, 1.0])[:3]
+            c_P = (np.linalg.inv(zero.poses[j.parent]) @ np.r_[data.oMi[jid].translation, 1.0])[:3]
             qi, valid = _revolute_values((M @ np.linalg.inv(M0))[:, :3, :3], M[:, :3, 3] - c_P, M0[:3, 3] - c_P, a_P)
             idx, qi = idx[valid], qi[valid]
             if idx.size < 2:
                 raise DataError(f"joint {j.name!r}: the track of {j.child!r} is turned over about an axis across "
                                 f"the joint at all but {idx.size} step(s), and its position lies on the joint line")
-            qi -= 2 * np.pi * np.round(np.interp(s0, idx, qi) / (2 * np.pi))
+            qi -= 2 * np.pi * np.round(np.interp(zero.steps[j.child], idx, qi) / (2 * np.pi))
         q[:, i] = np.interp(np.arange(T), idx, qi)
         observed[idx, i] = True
     names = {link: (None if k is None else tracks.names[k]) for link, k in reps.items()}
     # the measured span: before the first step at which every joint is measured (or after the
-    # last) a value would be held, not measured
-    every = np.flatnonzero(observed.all(axis=1))
-    first, last = (min(every[0], s0), max(every[-1], s0)) if every.size else (s0, s0)
+    # last) a value would be held, not measured; where no step measures them all, the steps that
+    # measure the most
+    count = observed.sum(axis=1)
+    every = np.flatnonzero(count == count.max())
+    first, last = min(every[0], s0), max(every[-1], s0)
     if last - first < 1:
         raise DataError(f"the joints {', '.join(model.joint_names)} are measured together at fewer than 2 time steps")
     span = slice(first, last + 1)
-    return JointValues(tracks.times[span].copy(), model.joint_names, q[span], observed[span], s0 - first, names)
+    zero_t = {j.name: float(tracks.times[zero.steps[j.child]]) for j in model.movable_joints}
+    return JointValues(tracks.times[span].copy(), model.joint_names, q[span], observed[span], s0 - first, names, zero_t)
 
 
 POSITION_FLOOR_M = 1e-6

@@ -209,6 +209,7 @@ def verify_reconstruction(
         **checked,
         "recording_duration_s": float(rec.t[-1] - rec.t[0]),
         "zero_step_t_s": float(rec.t[jr.values.zero_step]),
+        "joint_zero_t_s": jr.values.zero_t,
         "forcing": "wrenches.csv" if jr.forcing is not None else "none (free response)",
         "contacts": [] if jr.wrenches is None else [
             {"link": link, "t_s": [float(jr.wrenches.t[a]), float(jr.wrenches.t[b])]}

@@ -152,3 +152,24 @@ def test_joints_measured_together_at_one_step_only_is_a_named_error(two_joints):
         R[k, hide] = np.nan
     with pytest.raises(DataError, match="door_joint, drawer_joint are measured together at fewer than 2 time steps"):
         joint_values(model, PoseTracks(tracks.times, tracks.names, P, R), links)
+
+
+def test_joints_never_measured_together_are_each_zero_where_their_part_was_placed(two_joints):
+    """The door's track ends at step 9 and the drawer's starts at step 10 (a part tracked in
+    halves, a drawer hidden while the door is seen): no step sees both.  The door's q is 0 at step
+    0, the drawer's at step 10 (the nearest step that sees it), and both are MuJoCo's q from there."""
+    model, tracks, links, _ = _inputs(two_joints)
+    P, R = tracks.positions.copy(), tracks.Rs_world_track.copy()
+    for name, hidden in (("door", slice(10, None)), ("drawer", slice(0, 10))):
+        k = tracks.names.index(name)
+        P[k, hidden] = np.nan
+        R[k, hidden] = np.nan
+    values = joint_values(model, PoseTracks(tracks.times, tracks.names, P, R), links)
+    assert values.zero_t == {"door_joint": tracks.times[0], "drawer_joint": tracks.times[10]}
+    truth = read_recording(two_joints.recording)
+    for k, name in enumerate(model.joint_names):
+        q_true = np.interp(values.t, truth.t, truth.q[:, k]) - np.interp(values.zero_t[name], truth.t, truth.q[:, k])
+        seen = values.observed[:, k]
+        assert seen.sum() >= 10
+        np.testing.assert_allclose(values.q[seen, k], q_true[seen], atol=1e-9)
+    assert np.ptp(values.q[values.observed[:, 1], 1]) > 0.05  # the drawer moved while it was seen
