@@ -128,3 +128,24 @@ def test_a_door_pushed_open_from_shut_keeps_the_push_in_the_books(category):
     fine = fine_motion(JointRecording(Recording(camera, rec.joint_names, rec.q[::24]), rec, None, None))
     kept = free_segments(model, fine.q, fine.v, t=fine.t, sample_t=camera)
     assert kept[0][0] == 0 and fine.t[kept[0][1]] > PLAN.push_s
+
+
+@pytest.mark.parametrize("category", ["refrigerator", "cabinet_multi"])
+def test_a_part_resting_on_its_stop_while_another_moves_keeps_the_books(category):
+    # Two parts (a freezer and a fridge door; a drawer above a door) pushed one after the other,
+    # sampled at ~3 Hz.  The cubic spline through the samples of the part that rests shut rings
+    # a hair past its closed limit next to the samples where the other one moves; counted as a
+    # stop pressed in, that cut the first push and the wait out of the books: the true model's
+    # residual read 0.09 (refrigerator) and 0.16 (cabinet_multi) when written.  Only a joint that
+    # arrived at its limit with energy can press the stop in.
+    from kinemaforge_opt.verify.forcing import JointRecording
+    from kinemaforge_opt.verify.reconstruction import fine_motion
+
+    model, rec = _episode(category)
+    assert model.nq == 2
+    camera = rec.t[::38]
+    fine = fine_motion(JointRecording(Recording(camera, rec.joint_names, rec.q[::38]), rec, None, None))
+    assert at_stop(model, fine.q, -1e-6)[fine.t < 0.1].any()  # the ringing is there
+    kept = free_segments(model, fine.q, fine.v, t=fine.t, sample_t=camera)
+    assert kept[0][0] == 0 and fine.t[kept[0][1]] > PLAN.push_s
+    assert energy_residual(model, fine, sample_t=camera) < 0.02  # 0.012 and 0.010 when written
