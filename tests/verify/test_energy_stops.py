@@ -149,3 +149,25 @@ def test_a_part_resting_on_its_stop_while_another_moves_keeps_the_books(category
     kept = free_segments(model, fine.q, fine.v, t=fine.t, sample_t=camera)
     assert kept[0][0] == 0 and fine.t[kept[0][1]] > PLAN.push_s
     assert energy_residual(model, fine, sample_t=camera) < 0.02  # 0.012 and 0.010 when written
+
+
+def test_measured_samples_past_a_limit_stay_out_of_the_books():
+    # A model whose declared range is narrower than the measured motion (a limit fitted to another
+    # track than the one measured): samples 0.2 rad past it are no interpolant's ringing, and no
+    # motion of the model; the books leave them out whatever the speed they arrived with.
+    from kinemaforge_opt.model import JointLimits
+    from kinemaforge_opt.verify.forcing import JointRecording
+    from kinemaforge_opt.verify.reconstruction import fine_motion
+
+    model, rec = _episode("cabinet")
+    camera = rec.t[::24]
+    measured = rec.q[::24]
+    j = model.movable_joints[0]
+    upper = float(measured[:, 0].max()) - 0.2
+    model = model.with_joint(j.name, limits=JointLimits(j.limits.lower, upper))
+    fine = fine_motion(JointRecording(Recording(camera, rec.joint_names, measured), rec, None, None))
+    kept = free_segments(model, fine.q, fine.v, t=fine.t, sample_t=camera)
+    beyond = camera[measured[:, 0] > upper + 0.01 * (upper - j.limits.lower)]
+    assert beyond.size >= 3
+    for a, b in kept:
+        assert not np.any((beyond >= fine.t[a]) & (beyond <= fine.t[b]))
