@@ -23,7 +23,7 @@ from tqdm import tqdm
 
 from ..errors import DataError
 from ..graph import infer_tree
-from ..graph.tree import GraphResult
+from ..graph.tree import GraphResult, KinematicTree
 from ..io.atomic import atomic_path, write_text_atomic
 from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks, ZeroConfiguration, zero_configuration
@@ -203,7 +203,7 @@ class Reconstruction:
     labels: list[np.ndarray]
 
 
-def _zero_configuration(tracks: PoseTracks, tree) -> ZeroConfiguration:
+def _zero_configuration(tracks: PoseTracks, tree: KinematicTree) -> ZeroConfiguration:
     """The tree's zero configuration (:func:`~kinemaforge_opt.io.tracks.zero_configuration`) with
     each moving part following its representative track."""
     reps = {p: _representative(m, tracks) for p, m in tree.parts.items() if p != tree.root}
