@@ -4,7 +4,9 @@ alone and scored on the generator's ground truth.
 
 At the steps where both move, their moving points are one cluster; a proposal seeded there
 followed neither part and took a third of the door's pixels for the drawer (door IoU 0.61, part
-IoU 0.69).  Both parts must come out as their own parts, with the right joint types."""
+IoU 0.69).  Both parts must come out as their own parts, with the right joint types.  And a
+drawer pulled out beside a door (protocol_cabinet_multi_1) must come out a slide.  Both fail
+now, each since the commit its xfail names (found by git bisect)."""
 
 from __future__ import annotations
 
@@ -30,3 +32,22 @@ def test_a_drawer_above_a_swinging_door_is_two_parts(tmp_path):
     assert s["topology_ok"] and s["type_accuracy"] == 1.0
     assert s["iou_moving"]["door"] > 0.8  # 0.89 when written; 0.61 when one proposal held door and drawer
     assert s["part_iou"] > 0.8  # 0.84 when written; 0.69 then
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "since 5ba846a (ICP starts a voxel apart) the drawer's track turns 1 -> 9.5 degrees while it "
+    "slides: the constant-velocity guess wins every tie on its flat front and carries the turn on, "
+    "and the graph fits a helix; docs/NOTES.md, session after stop 62"))
+def test_a_drawer_slid_out_beside_a_door_stays_a_slide(tmp_path):
+    # protocol_cabinet_multi_1 at Table 1's size: the door is pushed open, then the drawer pulled
+    # out.  Right at 22d9c01 (a prismatic drawer, axis 0.04 degrees).
+    from problems.catalogue import get_case
+    from problems.eval_perception import ground_truth, run, score
+    from kinemaforge_opt.synth import generate_case
+
+    case = dataclasses.replace(get_case("protocol_cabinet_multi_1"), views=8, frames=20, width=640, height=480)
+    generate_case(case, tmp_path)
+    per, graph, _, _ = run(tmp_path / "sequence")
+    s = score(per, graph, ground_truth(tmp_path))
+    assert s["topology_ok"] and s["type_accuracy"] == 1.0
