@@ -134,7 +134,8 @@ def zero_configuration(tracks: PoseTracks, reps: dict[str, int | None], parent: 
             if not both.any():
                 raise DataError(f"link {link!r} is never seen together with its parent {parent[link]!r}: "
                                 "their relative pose, and so the joint between them, is unknown")
-            s = int(np.flatnonzero(both)[np.argmin(np.abs(np.flatnonzero(both) - step))])
+            together = np.flatnonzero(both)
+            s = int(together[np.argmin(np.abs(together - step))])
             T_link = tracks.Ts_world_track(reps[link])[s]
             if s == step and (kp is None or steps[parent[link]] == step):
                 poses[link] = T_link  # the parent is where its track was at this step

@@ -203,10 +203,14 @@ class Reconstruction:
     labels: list[np.ndarray]
 
 
-def _zero_configuration(tracks: PoseTracks, tree: KinematicTree) -> ZeroConfiguration:
+def _part_representatives(tracks: PoseTracks, tree: KinematicTree) -> dict[str, int]:
+    """Moving part -> the index of its representative track (:func:`_representative`)."""
+    return {p: _representative(m, tracks) for p, m in tree.parts.items() if p != tree.root}
+
+
+def _zero_configuration(tracks: PoseTracks, tree: KinematicTree, reps: dict[str, int]) -> ZeroConfiguration:
     """The tree's zero configuration (:func:`~kinemaforge_opt.io.tracks.zero_configuration`) with
-    each moving part following its representative track."""
-    reps = {p: _representative(m, tracks) for p, m in tree.parts.items() if p != tree.root}
+    each moving part following its representative track ``reps`` (:func:`_part_representatives`)."""
     return zero_configuration(tracks, {tree.root: None, **reps}, {j.child: j.parent for j in tree.joints})
 
 
@@ -234,7 +238,7 @@ def closed_form_lines(per: Perception, graph: GraphResult) -> dict[str, JointLin
     """The graph's closed-form joints as :class:`JointLine` s (zero configuration: the first step
     at which every moving part is seen, or :func:`_zero_configuration` where none sees them all)."""
     tracks, tree = per.tracks, graph.best
-    zero = _zero_configuration(tracks, tree)
+    zero = _zero_configuration(tracks, tree, _part_representatives(tracks, tree))
     T_world_track0 = zero.poses
     lines = {}
     for j in tree.joints:
@@ -292,9 +296,9 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
     tracks, tree = per.tracks, graph.best
     lines = closed_form_lines(per, graph) if lines is None else lines
     part_of = track_parts(graph, tracks)
-    reps = {p: _representative(m, tracks) for p, m in tree.parts.items() if p != tree.root}
+    reps = _part_representatives(tracks, tree)
     T_world_link0 = {tree.root: np.eye(4)}  # link frames at the zero configuration
-    T_world_track0 = _zero_configuration(tracks, tree).poses
+    T_world_track0 = _zero_configuration(tracks, tree, reps).poses
     joints, records = [], []
     for j in tree.joints:
         h, line = j.hypothesis, lines[j.name]

@@ -153,7 +153,7 @@ def free_segments(model: ArticulatedModel, q: np.ndarray, v: np.ndarray | None =
 
 def _at_samples(q: np.ndarray, t: np.ndarray, sample_t: np.ndarray) -> np.ndarray:
     """(S, n) the motion q (T, n) at times t (T,) [s] interpolated at the measured times ``sample_t`` (S,)."""
-    return np.column_stack([np.interp(sample_t, t, q[:, j]) for j in range(q.shape[1])]).reshape(len(sample_t), q.shape[1])
+    return np.array([np.interp(sample_t, t, column) for column in q.T]).T.reshape(len(sample_t), q.shape[1])
 
 
 def _interval_of(t: np.ndarray, sample_t: np.ndarray) -> np.ndarray:
