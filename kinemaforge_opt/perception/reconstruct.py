@@ -30,10 +30,11 @@ from ..io.tracks import PoseTracks, ZeroConfiguration, zero_configuration
 from ..model import ArticulatedModel, Geometry, Inertial, Joint, JointLimits, Link, write_urdf
 from ..nlp.gravity_aligned import face_directions
 from ..nlp.reconstruction import (ScrewData, ScrewOptions, ScrewResult, ancestor_joints, joints_seen, refine_screws,
-                                  stop_limits, transforms_world0_t, unseen_carried_on, with_ratios)
+                                  transforms_world0_t, unseen_carried_on, with_ratios)
 from ..nlp.visual import surface_model
 from ..parallel import thread_map
 from ..spatial import inverse, make_transform
+from ..stops import stop_limits
 from .change import STATIC, TEST_SIGMAS
 from .clouds import camera_range
 from .colour import relabel_contact_by_colour
@@ -292,7 +293,7 @@ def build_model(per: Perception, graph: GraphResult, density: float, name: str =
     ``labels`` (:func:`point_labels`) and ``masses`` (:func:`part_masses`) when already computed:
     neither depends on ``lines``.  ``gravity``: (3,) world gravity [m/s²], the sequence's (the
     root link's frame is the world frame).  ``limits``: joint name -> limits to write (the NLP's);
-    by default those of the lines' q (:func:`~kinemaforge_opt.nlp.reconstruction.stop_limits`)."""
+    by default those of the lines' q (:func:`~kinemaforge_opt.stops.stop_limits`)."""
     tracks, tree = per.tracks, graph.best
     lines = closed_form_lines(per, graph) if lines is None else lines
     part_of = track_parts(graph, tracks)

@@ -119,7 +119,7 @@ def test_errors_name_the_part_and_the_count():
 def test_stop_spans_find_an_abrupt_stop_and_not_a_smooth_one():
     """A door swinging at 1 rad/s into a stop at 1.0 rad (then at rest) against one that viscous
     damping brings to rest smoothly (q = 1 − e^{−2t}, same frames)."""
-    from kinemaforge_opt.nlp.reconstruction import stop_spans
+    from kinemaforge_opt.stops import stop_spans
 
     t = np.arange(0.0, 3.0, 0.1)
     q_hit = np.minimum(t, 1.0)[:, None] + np.random.default_rng(0).normal(0, 1e-3, (t.size, 1))
@@ -134,8 +134,9 @@ def test_a_lid_that_falls_onto_a_compliant_stop_rests_there_to_the_end():
     """A lid lifted to -1.35 rad and let go falls back onto its stop at 0; the frame that catches
     the impact sees it pressed 0.035 rad into the stop (more than the band, 2 % of the range),
     then it rests at 0.  The stop holds it from the impact to the last frame, and its limit is
-    where it rests; a door that stops at its limit keeps the observed range."""
-    from kinemaforge_opt.nlp.reconstruction import STOP_BAND, stop_limits, stop_spans
+    where it rests; its other end is where it turned between the frames at -1.33, -1.35 and -1.0
+    rad (the parabola's vertex); a door that stops at its limit keeps the observed range."""
+    from kinemaforge_opt.stops import STOP_BAND, stop_limits, stop_spans
 
     t = np.arange(20) * 0.158
     lifted = [0.0, -0.11, -0.39, -0.74, -1.08, -1.33, -1.35, -1.0]
@@ -143,7 +144,8 @@ def test_a_lid_that_falls_onto_a_compliant_stop_rests_there_to_the_end():
     q = np.array(lifted + [0.035] + list(rest))[:, None]
     assert 0.035 - rest.max() > STOP_BAND * np.ptp(q)  # at rest, outside the band of the extreme
     assert stop_spans(t, q) == [(7, 19)]
-    np.testing.assert_allclose(stop_limits(t, q), [[-1.35, rest.max()]])
+    a, top, c = lifted[5:8]  # equal frame steps: the vertex lies (c - a)² / (8 (a - 2 top + c)) past the top
+    np.testing.assert_allclose(stop_limits(t, q), [[top - (c - a) ** 2 / (8 * (a - 2 * top + c)), rest.max()]])
     t_door = np.arange(0.0, 3.0, 0.1)
     q_door = np.minimum(t_door, 1.0)[:, None] + np.random.default_rng(0).normal(0, 1e-3, (t_door.size, 1))
     np.testing.assert_allclose(stop_limits(t_door, q_door), [[q_door.min(), q_door.max()]])

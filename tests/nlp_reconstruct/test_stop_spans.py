@@ -1,4 +1,4 @@
-"""Stop impacts in camera-rate joint trajectories (nlp.reconstruction.stop_spans / stop_free)
+"""Stop impacts in camera-rate joint trajectories (stops.stop_spans, nlp.reconstruction.stop_free)
 against motions integrated independently (scipy) or written in closed form, whose impact times
 are known."""
 
@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from kinemaforge_opt.nlp.reconstruction import stop_free, stop_spans
+from kinemaforge_opt.nlp.reconstruction import stop_free
+from kinemaforge_opt.stops import stop_spans
 
 # A laptop lid (0.83 kg, centre of mass 0.114 m from the hinge, 0.0144 kg m² about it) between a
 # closed stop at 0 and an open stop at 2.37 rad (past vertical), pushed open by a torque that

@@ -4,7 +4,8 @@ only takes while moving into the frames nobody saw is no observed stop."""
 import numpy as np
 import pytest
 
-from kinemaforge_opt.nlp.reconstruction import stop_limits, unseen_carried_on
+from kinemaforge_opt.nlp.reconstruction import unseen_carried_on
+from kinemaforge_opt.stops import stop_limits
 
 T = np.linspace(0.0, 3.0, 31)  # 10 Hz frames [s]
 
