@@ -22,6 +22,7 @@ from ..errors import DataError
 from ..io.recording import Recording
 from ..model import ArticulatedModel
 from ..model.pinocchio import build_pin_model
+from ..stops import stop_impacts
 
 
 def mechanical_energy(model: ArticulatedModel, q: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -111,7 +112,11 @@ def free_segments(model: ArticulatedModel, q: np.ndarray, v: np.ndarray | None =
     one's ringing cut the first push out of the books, the true model read 0.09 to 0.16; Table 1's
     two-part runs, true model 0.037 → 0.005), while measured samples far past it are motion the
     model cannot make (protocol_moving_cabinet's second door, tracked 0.21 rad past its closed
-    limit for 2.3 s: 0.84 with those spans in the books, 0.16 without)."""
+    limit for 2.3 s: 0.84 with those spans in the books, 0.16 without).  A measured interval that
+    holds a stop impact of the samples themselves (:func:`~kinemaforge_opt.stops.stop_impacts`) is
+    out too, with its neighbours, whatever the model's limits: by the limits alone, a
+    reconstruction of protocol_refrigerator_1@s1 kept a door's impact in its books (one segment
+    over both doors' pushes where the true model's books have two)."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     stop = at_stop(model, q, tolerance)
     past = at_stop(model, q, -1e-6)  # beyond a limit (by more than numerical jitter)
@@ -130,6 +135,11 @@ def free_segments(model: ArticulatedModel, q: np.ndarray, v: np.ndarray | None =
         stop &= half_m * into**2 > floor
     hit = (stop | past).any(axis=1)
     free = ~(hit[1:] | hit[:-1])  # interval i: samples i -> i + 1
+    if sample_t is not None and t is not None and len(sample_t) > 1:
+        # an impact the measured samples show is out, wherever the model puts its limits
+        measured = _interval_of(t[:-1], sample_t)
+        for e in stop_impacts(sample_t, _at_samples(q, t, sample_t)):
+            free &= measured != e.i - 1
     if sample_t is not None and t is not None and not free.all():
         # q, v interpolate coarser measured samples: an impact flagged in one measured interval
         # happened somewhere in it, and the interpolant's error spreads to its neighbours
