@@ -24,7 +24,7 @@ Named costs (each reported at the optimum; any can be switched off):
   τ_applied = Jᵀ W maps the recorded force (wrenches.csv: force f at world point p, on the link it
   grips) to joint forces through the joint screws of the current model; only between the first
   and the last step at which every moving part is seen (:func:`seen_free`) and outside the stop
-  spans (:func:`stop_spans`);
+  spans (:func:`~kinemaforge_opt.stops.stop_spans`);
 - ``energy`` (the seed's Eq. 5): per window, ΔE − ∫ (τ_applied + τ_passive)·v dt relative to the
   energy scale of the motion; ``soft`` (a cost, divided by ``energy_sigma``) or ``hard`` (the
   constraint |·| ≤ ``energy_tolerance``).
@@ -128,7 +128,7 @@ class ScrewOptions:
     log(inertia ratio) around 1 (the mesh's inertia), a Gaussian prior added to the objective
     (``inertia_prior``; 0 or inf = no prior).  stop_impacts: leave the dynamics and energy terms
     out from the frame before a joint runs into the end of its observed range at speed (an impact
-    on a stop, which the NLP does not model) until it has left that end (:func:`stop_spans`).
+    on a stop, which the NLP does not model) until it has left that end (:func:`~kinemaforge_opt.stops.stop_spans`).
     gravity_aligned: after the last dense stage, refit with every axis near plumb or level (or
     square to its parent's faces, ``ScrewData.faces``) made so, kept if the BIC prefers it
     (:mod:`.gravity_aligned`).  fit_thickness: the visual stages on the frame grid fit each part's
@@ -294,7 +294,7 @@ class ScrewProblem:
 @dataclass(frozen=True, eq=False)
 class ScrewResult:
     """The refined estimate.  model: the model with refined axes, origins, pitches, limits (observed
-    range of q, or where a joint rests against a stop: :func:`stop_limits`), and damping / Coulomb
+    range of q, or where a joint rests against a stop: :func:`~kinemaforge_opt.stops.stop_limits`), and damping / Coulomb
     friction / scaled inertia where identified.  q: (T, n) at the observed steps.  terms: name -> value of each term at the end, None for a term switched off:
     ``vis`` the robust sum Σ ρ_δ(r)/δ² over the final correspondences, ``dyn`` the robust sum of
     normalised defects, ``energy`` the soft penalty (× energy_weight) or, for the hard constraint,
@@ -378,7 +378,7 @@ def initial_state(data: ScrewData) -> ScrewState:
 
 def state_model(data: ScrewData, state: ScrewState) -> ArticulatedModel:
     """The model of ``state``: axes, origins, pitches, damping/Coulomb and inertia ratios applied,
-    limits those of q at the observed steps (:func:`stop_limits`, as the written URDF's)."""
+    limits those of q at the observed steps (:func:`~kinemaforge_opt.stops.stop_limits`, as the written URDF's)."""
     model = _with_origins(data.model, state.origins)
     cols = np.searchsorted(state.t, data.times)
     ranges = stop_limits(data.times, state.q[cols], joints_seen(data))
@@ -610,7 +610,7 @@ def _rates(t: np.ndarray, q: np.ndarray) -> tuple[CubicSpline, np.ndarray, np.nd
 
 
 def stop_free(times: np.ndarray, q: np.ndarray, t_grid: np.ndarray) -> np.ndarray:
-    """(G − 1,) 1.0 for each interval of ``t_grid`` (G,) [s] outside every :func:`stop_spans` span
+    """(G − 1,) 1.0 for each interval of ``t_grid`` (G,) [s] outside every :func:`~kinemaforge_opt.stops.stop_spans` span
     of the frames (times, q), else 0.0 (an interval is in a span when its midpoint is)."""
     mid = (t_grid[:-1] + t_grid[1:]) / 2
     free = np.ones(mid.size)
