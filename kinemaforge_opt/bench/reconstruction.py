@@ -357,7 +357,8 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
         try:
             from ..verify.reconstruction import verify_reconstruction
 
-            doc = {**doc, "verification": verify_reconstruction(out_dir, case_root / "sequence", reconstruction=r)}
+            doc = {**doc, "verification": verify_reconstruction(out_dir, case_root / "sequence", reconstruction=r,
+                                                                with_range=True)}
         except Exception as e:  # noqa: BLE001
             rec["verification_error"] = f"{type(e).__name__}: {e}"
         rec["timing_s"]["verify"] = time.perf_counter() - t1
@@ -394,6 +395,7 @@ def evaluate_case(case, case_root: Path, out_dir: Path, options: dict | None = N
         estimated_joints=[[j.parent, j.child, j.type] for j in est],
         joints=[asdict(s) for s in scores],
         drift_m=drift, drift_1s_m=drift.get("1"), drift_50s_m=drift.get("50"),
+        drift_range_m=ver.get("drift_range_m", {}),
         energy_residual=None if ver.get("energy_residual") is None else float(ver["energy_residual"]),
         truth_drift_m=truth.get("drift_m", {}),
         truth_drift_1s_m=truth.get("drift_m", {}).get("1"), truth_drift_50s_m=truth.get("drift_m", {}).get("50"),

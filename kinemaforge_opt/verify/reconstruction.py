@@ -14,7 +14,9 @@ motion the reconstruction measured:
    between where a moving link's origin or centre of mass is in the replay and where it is in
    the measured motion.  **Past the end of the recording** (``beyond_recording``) the measured
    motion is its last pose held and the replay keeps the last τ: the drift then says whether the
-   model comes to rest where the real object did, the only observation there is;
+   model comes to rest where the real object did, the only observation there is.  The same
+   replays with each moving link's mass and inertia 1 % up and down give ``drift_range_m``
+   (:func:`.drift.drift_range`): a wide range marks a knife edge the drift cannot judge the fit by;
 4. the energy residual of the measured motion under the model (:func:`.energy.energy_residual`),
    evaluated at the force's rate on a cubic spline of the measured q, broken at each stop impact
    the samples show (:func:`fine_motion`), over the spans where no joint is on one of the model's
@@ -48,7 +50,7 @@ from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks, read_tracks, write_tracks
 from ..model import ArticulatedModel, read_urdf
 from ..stops import stop_impacts
-from .drift import DEFAULT_HORIZONS_S, DriftReport, drift, fit_initial_velocity
+from .drift import DEFAULT_HORIZONS_S, MASS_SHARE, DriftReport, drift, drift_range, fit_initial_velocity
 from .energy import energy_residual, free_segments
 from .forcing import JointRecording, joint_recording
 from .plot import plot_trajectories
@@ -173,17 +175,19 @@ def impact_broken_spline(times: np.ndarray, q: np.ndarray, t: np.ndarray) -> tup
 
 
 def replay_check(model: ArticulatedModel, jr: JointRecording, horizons_s=DEFAULT_HORIZONS_S,
-                 discrete: bool = True) -> tuple[dict, DriftReport]:
+                 discrete: bool = True, with_range: bool = False) -> tuple[dict, DriftReport]:
     """Steps 2-4 of the module docs for ``model`` on the joint recording ``jr``: (JSON-ready
     {drift_m, energy_residual, drift_definition, beyond_recording, max_drift_m, joint_rms, v0},
-    the :class:`~.drift.DriftReport`)."""
+    the :class:`~.drift.DriftReport`).  ``with_range``: also ``drift_range_m``, {horizon: [least,
+    largest]} over the replays with each moving link's mass and inertia scaled by 1 ± MASS_SHARE
+    (:func:`.drift.drift_range`; two more replays per moving link)."""
     rec = jr.recording
     v0 = fit_initial_velocity(model, rec, jr.forcing, discrete=discrete)
     report = drift(model, rec, horizons_s, discrete=discrete, forcing=jr.forcing, v0=v0)
     fine = fine_motion(jr)
     residual = energy_residual(model, fine, sample_t=rec.t)
     books = sum(fine.t[b] - fine.t[a] for a, b in free_segments(model, fine.q, fine.v, t=fine.t, sample_t=rec.t))
-    return {
+    out = {
         "drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
         # None: the motion never leaves the model's stops, so no span has energy books to check
         "energy_residual": None if np.isnan(residual) else float(residual),
@@ -193,18 +197,24 @@ def replay_check(model: ArticulatedModel, jr: JointRecording, horizons_s=DEFAULT
         "max_drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.max_drift_m)},
         "joint_rms": {_key(h): float(d) for h, d in zip(report.horizons_s, report.joint_rms)},
         "v0": v0.tolist(),
-    }, report
+    }
+    if with_range:
+        spread = drift_range(model, rec, horizons_s, discrete=discrete, forcing=jr.forcing, v0=v0)
+        out["drift_range_m"] = {_key(h): [float(lo), float(hi)] for h, (lo, hi) in zip(report.horizons_s, spread)}
+        out["drift_range_definition"] = (f"least and largest drift_m over the replays with one moving link's mass "
+                                         f"and inertia scaled by 1 ± {MASS_SHARE:g} (a wide range: a knife edge)")
+    return out, report
 
 
 def verify_model(model: ArticulatedModel, out: str | os.PathLike, sequence: str | os.PathLike,
-                 horizons_s=DEFAULT_HORIZONS_S, discrete: bool = True) -> dict:
+                 horizons_s=DEFAULT_HORIZONS_S, discrete: bool = True, with_range: bool = False) -> dict:
     """The same check for another model of the reconstruction in ``out`` (e.g. the one diagnosis
     augmented; its joints must be the reconstruction's): the measured motion and forcing of
     ``out`` and ``sequence``, replayed with ``model``.  Writes nothing; returns
     :func:`replay_check`'s dict."""
     _, doc = load_reconstruction(out)
     jr = reconstruction_recording(out, sequence, model, doc)
-    return replay_check(model, jr, horizons_s, discrete)[0]
+    return replay_check(model, jr, horizons_s, discrete, with_range)[0]
 
 
 def verify_reconstruction(
@@ -213,13 +223,15 @@ def verify_reconstruction(
     reconstruction=None,
     horizons_s=DEFAULT_HORIZONS_S,
     discrete: bool = True,
+    with_range: bool = False,
 ) -> dict:
     """Verify the reconstruction in ``out`` against ``sequence`` in Drake (module docs) and add the
     result to OUT/reconstruction.json as ``verification``; returns that dict.
 
     reconstruction: the in-memory :class:`~kinemaforge_opt.perception.reconstruct.Reconstruction`
     (its model, document, tracks and clouds are used and OUT/tracks.csv is written), or None to
-    read everything from ``out``."""
+    read everything from ``out``.  with_range: also the drift's range over ±1 % of each moving
+    link's mass (``drift_range_m``, :func:`replay_check`)."""
     start = time.perf_counter()
     out = Path(out)
     if reconstruction is not None:
@@ -232,7 +244,7 @@ def verify_reconstruction(
     jr = reconstruction_recording(out, sequence, model, doc, tracks, clouds)
     rec = jr.recording
     write_recording(out / "recording.csv", rec)
-    checked, report = replay_check(model, jr, horizons_s, discrete)
+    checked, report = replay_check(model, jr, horizons_s, discrete, with_range)
     sim = report.simulated
     write_recording(out / "replay.csv", Recording(sim.t + rec.t[0], sim.joint_names, sim.q, sim.v))
     plot_trajectories(out / "trajectories.png", report.simulated, rec.t - rec.t[0], rec.q,

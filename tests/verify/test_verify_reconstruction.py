@@ -69,6 +69,16 @@ def test_true_model_replays_mujoco_and_nominal_does_not(door, tmp_path):
     assert energy["true"] < 0.05 and energy["nominal"] > 5 * energy["true"]  # 0.019 vs 0.42 when written
 
 
+def test_the_drift_range_is_reported_when_asked(door, tmp_path):
+    out = truth_folder(door, tmp_path / "true", door.true_urdf)
+    assert "drift_range_m" not in verify_reconstruction(out, door.sequence)
+    v = verify_reconstruction(out, door.sequence, with_range=True)
+    assert set(v["drift_range_m"]) == set(HORIZONS) and "1 ± 0.01" in v["drift_range_definition"]
+    for h in HORIZONS:
+        least, largest = v["drift_range_m"][h]
+        assert 0.0 <= least <= largest < v["drift_m"][h] + 0.01  # a damped door: no knife edge
+
+
 def test_missing_tracks_are_named(door, tmp_path):
     out = truth_folder(door, tmp_path / "r", door.model_urdf)
     (out / "tracks.csv").unlink()
