@@ -19,7 +19,7 @@ import numpy as np
 
 from ..io.recording import Recording
 from ..model import ArticulatedModel
-from .drift import DEFAULT_HORIZONS_S, drift
+from .drift import DEFAULT_HORIZONS_S, drift, drift_range
 from .energy import energy_residual, model_ordered
 from .plot import plot_trajectories
 from .simulate import simulate
@@ -46,15 +46,22 @@ def verify_recording(
     plot_path: str | os.PathLike,
     horizons_s=DEFAULT_HORIZONS_S,
     discrete: bool = True,
+    with_range: bool = False,
 ) -> dict:
     """Drift per horizon (keys are the horizons in s, as in ``reconstruction.json``), energy
-    residual and timings; writes the recorded-vs-simulated plot to ``plot_path``."""
+    residual and timings; writes the recorded-vs-simulated plot to ``plot_path``.  with_range:
+    also ``drift_range_m``, the drift's least and largest value per horizon with each moving
+    link's mass and inertia scaled by 1 ± MASS_SHARE (:func:`.drift.drift_range`)."""
     start = time.perf_counter()
     rec = model_ordered(model, recording)
     report = drift(model, rec, horizons_s, discrete=discrete)
     residual = energy_residual(model, rec)
     plot_trajectories(plot_path, report.simulated, rec.t - rec.t[0], rec.q,
                       title=f"{model.name}: recorded vs Drake replay")
+    extra = {}
+    if with_range:
+        spread = drift_range(model, rec, horizons_s, discrete=discrete)
+        extra["drift_range_m"] = {_key(h): [float(lo), float(hi)] for h, (lo, hi) in zip(report.horizons_s, spread)}
     return {
         "mode": "replay",
         "plant": "discrete_1ms" if discrete else "continuous",
@@ -65,6 +72,7 @@ def verify_recording(
         "beyond_recording": {_key(h): bool(b) for h, b in zip(report.horizons_s, report.beyond_recording)},
         "energy_residual": None if np.isnan(residual) else float(residual),
         "plot": Path(plot_path).name,
+        **extra,
         "timing_s": {"replay": report.simulated.wall_time_s, "total": time.perf_counter() - start},
     }
 

@@ -34,6 +34,18 @@ def test_verify_with_recording_writes_json_and_plot(files, capsys):
     assert not list(out.glob(".*.tmp"))
 
 
+def test_drift_range_is_reported_with_the_flag(files, capsys):
+    # a damped spring-slider: 1 % more or less mass moves its replay by ~1 % of its motion
+    out = files / "out"
+    assert main(["verify", str(files / "model.urdf"), str(files / "rec.csv"), "-o", str(out),
+                 "--horizons", "1,5", "--continuous", "--drift-range"]) == 0
+    result = json.loads((out / "verification.json").read_text())
+    assert set(result["drift_range_m"]) == {"1", "5"}
+    for least, largest in result["drift_range_m"].values():
+        assert 0.0 <= least <= largest < 0.01
+    assert "1 s: " in capsys.readouterr().out
+
+
 def test_verify_without_recording_is_a_conservative_check(tmp_path):
     write_urdf(cabinet(), tmp_path / "cab.urdf")
     assert main(["verify", str(tmp_path / "cab.urdf"), "-o", str(tmp_path / "out"), "--duration", "3"]) == 0
