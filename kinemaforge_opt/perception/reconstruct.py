@@ -31,6 +31,7 @@ from ..model import ArticulatedModel, Geometry, Inertial, Joint, JointLimits, Li
 from ..nlp.gravity_aligned import face_directions
 from ..nlp.reconstruction import (ScrewData, ScrewOptions, ScrewResult, ancestor_joints, joints_seen, refine_screws,
                                   transforms_world0_t, unseen_carried_on, with_ratios)
+from ..nlp.screw_type import closed_form_fit, simplest_supported
 from ..nlp.visual import surface_model
 from ..parallel import thread_map
 from ..spatial import inverse, make_transform
@@ -493,6 +494,38 @@ def _with_part_solids(per: Perception, labels: list[np.ndarray], model: Articula
     return fill_part_solids([c.points for c in per.clouds], labels, part_motions(model, q), per.voxel, BASE)
 
 
+def supported_screws(per: Perception, graph: GraphResult, seq, density: float, name: str,
+                     lines: dict[str, JointLine], built: tuple, points_per_part: int):
+    """The graph with each helical joint replaced by the simpler screw of the same edge (revolute,
+    prismatic) when the observed points support it as well (:mod:`~kinemaforge_opt.nlp.screw_type`:
+    the closed forms' visual fit, BIC); ``lines`` and ``built`` (build_model's result) follow.
+    Returns (graph, lines, built, notes: one line per helix tested).  A replacement keeps the
+    edge's confidence (P(parent) · P(type)): the type is now the points' call."""
+    notes = []
+    labels, masses = built[4], built[5]
+    for k, j in enumerate(graph.best.joints):
+        hyps = graph.edges.get((j.parent, j.child), {})
+        if j.type != "helical":
+            continue
+        candidates = {"helical": (graph, lines, built)}
+        for kind in ("revolute", "prismatic"):
+            if kind not in hyps:
+                continue
+            joints = list(graph.best.joints)
+            joints[k] = dataclasses.replace(j, hypothesis=dataclasses.replace(hyps[kind], confidence=j.hypothesis.confidence))
+            g = dataclasses.replace(graph, best=dataclasses.replace(graph.best, joints=tuple(joints)))
+            g_lines = closed_form_lines(per, g)
+            candidates[kind] = (g, g_lines, build_model(per, g, density, name, g_lines, labels, masses, seq.gravity))
+        fits = {kind: closed_form_fit(screw_data(per, seq, b[0], l, b[2], b[4]), points_per_part)
+                for kind, (_, l, b) in candidates.items()}
+        chosen = simplest_supported(fits)
+        pairs = min(n for _, n in fits.values())
+        notes.append(f"type: {j.name} is a helix on its track; on the points (closed forms, ½χ² over {pairs} pairs: "
+                     f"{', '.join(f'{kind} {v:.1f}' for kind, (v, _) in fits.items())}; BIC) a {chosen} joint")
+        graph, lines, built = candidates[chosen]
+    return graph, lines, built, notes
+
+
 def refine_model(per: Perception, graph: GraphResult, seq, density: float, options: ScrewOptions | None,
                  name: str = "reconstruction"):
     """Closed-form model, then (unless ``options`` is None) the screw-axis NLP and the model rebuilt
@@ -501,14 +534,18 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
     build_model's first five, the ``nlp`` document (None without NLP) and build_model's mass
     report."""
     lines = closed_form_lines(per, graph)
-    model, records, clouds_world, meshes, labels, masses, mass_report = build_model(per, graph, density, name, lines,
-                                                                                   gravity=seq.gravity)
+    built = build_model(per, graph, density, name, lines, gravity=seq.gravity)
+    model, records, clouds_world, meshes, labels, masses, mass_report = built
     if not model.movable_joints:
         return model, records, clouds_world, meshes, labels, None, mass_report
+    type_notes = []
     if options is None:
         final_lines, moved, q = lines, model, np.column_stack([lines[j.name].q for j in model.movable_joints])
     else:
         t0 = time.perf_counter()
+        graph, lines, built, type_notes = supported_screws(per, graph, seq, density, name, lines, built,
+                                                           options.points_per_part)
+        model, records, clouds_world, meshes, labels, masses, mass_report = built
         data = screw_data(per, seq, model, lines, clouds_world, labels)
         prepare_s = time.perf_counter() - t0
         result = refine_screws(data, options)
@@ -526,7 +563,7 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
     model = _apply_identified(model, records, result, data.model)
     doc = {
         "enabled": True, "terms": result.terms, "iterations": result.iterations, "success": result.success,
-        "time_s": prepare_s + result.time_s, "prepare_s": prepare_s, "solve_s": result.time_s, "fitted": list(result.fitted), "identified": list(result.identified), "notes": list(result.notes),
+        "time_s": prepare_s + result.time_s, "prepare_s": prepare_s, "solve_s": result.time_s, "fitted": list(result.fitted), "identified": list(result.identified), "notes": [*type_notes, *result.notes],
         "stages": [{k: v for k, v in st.items() if k in ("stage", "iterations", "success", "accepted", "status", "time_s", "solve_s", "costs")}
                    for st in result.stages],
         "options": dataclasses.asdict(options),

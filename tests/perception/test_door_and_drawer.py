@@ -33,7 +33,8 @@ BEFORE_AXES_ORDER = ("since 32835bf (fused points in their pixels' order, not th
                      "docs/NOTES.md, session after stop 51")
 BEFORE_STARTS = ("since 5ba846a (ICP starts a voxel apart) the drawer's track turns 1 -> 9.5 degrees while it "
                  "slides: the constant-velocity guess wins every tie on its flat front and carries the turn on, "
-                 "and the graph fits a helix; docs/NOTES.md, session after stop 62")
+                 "and the graph fits a helix (the reconstruction's points make it a slide again: "
+                 "test_the_reconstruction_makes_the_turning_drawer_a_slide); docs/NOTES.md, session after stop 62")
 
 
 @pytest.mark.slow
@@ -50,3 +51,19 @@ def test_a_drawer_and_a_door_are_a_slide_and_a_hinge(name, iou_floor, tmp_path):
     assert s["topology_ok"] and s["type_accuracy"] == 1.0
     assert s["iou_moving"]["door"] > iou_floor
     assert s["part_iou"] > iou_floor
+
+
+@pytest.mark.slow
+def test_the_reconstruction_makes_the_turning_drawer_a_slide(tmp_path):
+    """protocol_cabinet_multi_1's drawer: the graph fits its turning track with a helix; the
+    closed forms on the observed points (nlp.screw_type) make it a slide, and the NLP fits that."""
+    from problems.catalogue import get_case
+    from kinemaforge_opt.perception.reconstruct import reconstruct_sequence
+    from kinemaforge_opt.synth import generate_case
+
+    case = dataclasses.replace(get_case("protocol_cabinet_multi_1"), views=8, frames=20, width=640, height=480)
+    generate_case(case, tmp_path / "case")
+    rec = reconstruct_sequence(tmp_path / "case" / "sequence")
+    assert sorted(j["type"] for j in rec.document["joints"]) == ["prismatic", "revolute"]
+    (note,) = [n for n in rec.document["nlp"]["notes"] if n.startswith("type:")]
+    assert "a prismatic joint" in note
