@@ -504,9 +504,9 @@ def supported_screws(per: Perception, graph: GraphResult, seq, density: float, n
     notes = []
     labels, masses = built[4], built[5]
     for k, j in enumerate(graph.best.joints):
-        hyps = graph.edges.get((j.parent, j.child), {})
         if j.type != "helical":
             continue
+        hyps = graph.edges.get((j.parent, j.child), {})
         candidates = {"helical": (graph, lines, built)}
         for kind in ("revolute", "prismatic"):
             if kind not in hyps:
@@ -516,8 +516,8 @@ def supported_screws(per: Perception, graph: GraphResult, seq, density: float, n
             g = dataclasses.replace(graph, best=dataclasses.replace(graph.best, joints=tuple(joints)))
             g_lines = closed_form_lines(per, g)
             candidates[kind] = (g, g_lines, build_model(per, g, density, name, g_lines, labels, masses, seq.gravity))
-        fits = {kind: closed_form_fit(screw_data(per, seq, b[0], l, b[2], b[4]), points_per_part)
-                for kind, (_, l, b) in candidates.items()}
+        fits = {kind: closed_form_fit(screw_data(per, seq, c_built[0], c_lines, c_built[2], c_built[4]), points_per_part)
+                for kind, (_, c_lines, c_built) in candidates.items()}
         chosen = simplest_supported(fits)
         pairs = min(n for _, n in fits.values())
         notes.append(f"type: {j.name} is a helix on its track; on the points (closed forms, ½χ² over {pairs} pairs: "

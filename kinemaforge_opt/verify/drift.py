@@ -121,9 +121,9 @@ def drift_range(
     moving link's mass and rotational inertia scaled by 1 − ``share`` or 1 + ``share`` (its centre
     of mass kept), every other argument as :func:`drift` takes it.  A narrow range says the drift
     is the model's; a wide one that the motion is a knife edge, where a hair more or less mass
-    decides the outcome (a laptop lid the hand pushes just over its balance point: laptop_1's
-    1-s drift 0.003 or 0.16 m for its lid's mass ±1 %), and the drift measures that hair, not the
-    fit.  Two replays per moving link."""
+    decides the outcome, and the drift measures that hair, not the fit (protocol_laptop_1's lid,
+    pushed just over its balance point: 1-s drift 0.051 m, 0.09-0.16 m with its mass ±1 %; at 50 s
+    0.003-0.21 m).  Two replays per moving link."""
     runs = []
     for link in sorted({j.child for j in model.movable_joints}):
         inertial = model.link(link).inertial
