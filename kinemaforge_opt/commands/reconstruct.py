@@ -51,6 +51,7 @@ def register(subparsers) -> None:
         epilog="examples:\n  kinemaforge reconstruct out/demo/episode/sequence -o out/rec      (after `kinemaforge demo -o out/demo`)\n"
         "  kinemaforge diagnose out/rec --sequence out/demo/episode/sequence -o out/rec_diag\n"
         "  kinemaforge view out/rec\n"
+        "  kinemaforge reconstruct SEQ -o out/rec --drift-range                 the drift with link masses ±1 %\n"
         "  kinemaforge reconstruct tracks.csv -o out/rec_tracks\n"
         "  kinemaforge reconstruct ../shared/data/real/articulation/mechanisms_iros_2010/drawer -o out/drawer\n",
     )
