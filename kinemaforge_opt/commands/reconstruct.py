@@ -161,7 +161,7 @@ def _run_sequence(args) -> int:
     from ..nlp.reconstruction import ScrewOptions
     from ..perception.reconstruct import DEFAULT_DENSITY, reconstruct_sequence
     from ..verify.reconstruction import verify_reconstruction
-    from ..verify.report import energy_text
+    from ..verify.report import energy_text, range_text
 
     density = DEFAULT_DENSITY if args.density is None else args.density
     rec = reconstruct_sequence(args.input, args.out, method=args.method, k_best=args.k_best, density=density,
@@ -188,8 +188,8 @@ def _run_sequence(args) -> int:
         print(f"kinemaforge reconstruct: the Drake verification failed: {e}", file=sys.stderr)
         return 1
     ranges = v.get("drift_range_m", {})
-    drift = ", ".join(f"{h} s: {d:.3g}" + ("*" if v["beyond_recording"][h] else "")
-                      + (f" ({ranges[h][0]:.3g}–{ranges[h][1]:.3g})" if h in ranges else "") for h, d in v["drift_m"].items())
+    drift = ", ".join(f"{h} s: {d:.3g}" + ("*" if v["beyond_recording"][h] else "") + range_text(ranges, h)
+                      for h, d in v["drift_m"].items())
     print(f"Drake verification ({v['forcing']}): drift [m] {drift}; energy residual {energy_text(v['energy_residual'])} "
           f"({v['timing_s']['total']:.1f} s)")
     print(f"  * past the {v['recording_duration_s']:.1f} s recording: distance to its last pose, held")

@@ -80,7 +80,7 @@ def _horizons(text: str) -> tuple[float, ...]:
 def run(args) -> int:
     from ..io.recording import read_recording
     from ..model import read_urdf
-    from ..verify.report import energy_text, verify_free, verify_recording
+    from ..verify.report import energy_text, range_text, verify_free, verify_recording
 
     horizons = _horizons(args.horizons)
     model = read_urdf(args.model)
@@ -97,8 +97,7 @@ def run(args) -> int:
     path = out / "verification.json"
     write_text_atomic(path, json.dumps(result, indent=2) + "\n")
     ranges = result.get("drift_range_m", {})
-    summary = ", ".join(f"{h} s: {d:.3g} m" + (f" ({ranges[h][0]:.3g}–{ranges[h][1]:.3g})" if h in ranges else "")
-                        for h, d in result["drift_m"].items())
+    summary = ", ".join(f"{h} s: {d:.3g} m{range_text(ranges, h)}" for h, d in result["drift_m"].items())
     print(f"energy residual {energy_text(result['energy_residual'])}" + (f"; drift {summary}" if summary else ""))
     print(path)
     return 0

@@ -102,6 +102,11 @@ def drift(
     return DriftReport(h, drift_m, max_drift, rms, h > t_rec[-1], sim, q_ref)
 
 
+def horizon_key(h: float) -> str:
+    """A horizon [s] as the key of the per-horizon dicts of the verification documents ("1", "50")."""
+    return f"{h:g}"
+
+
 MASS_SHARE = 0.01
 """How much :func:`drift_range` scales each moving link's mass and inertia by, up and down: a
 reconstruction's masses come from its meshes and a density, or from forces at a camera's rate,
@@ -138,6 +143,12 @@ def drift_range(
         return np.full((h.size, 2), np.nan)
     runs = np.array(runs)
     return np.column_stack([runs.min(axis=0), runs.max(axis=0)])
+
+
+def range_record(horizons_s, spread: np.ndarray) -> dict[str, list[float]]:
+    """:func:`drift_range`'s (H, 2) result as the documents hold it: {horizon key: [least, largest]}."""
+    horizons = np.asarray(horizons_s, dtype=float).reshape(-1)
+    return {horizon_key(h): [float(lo), float(hi)] for h, (lo, hi) in zip(horizons, spread)}
 
 
 INITIAL_WINDOW_S = 0.25

@@ -136,14 +136,12 @@ def free_segments(model: ArticulatedModel, q: np.ndarray, v: np.ndarray | None =
     hit = (stop | past).any(axis=1)
     free = ~(hit[1:] | hit[:-1])  # interval i: samples i -> i + 1
     if sample_t is not None and t is not None and len(sample_t) > 1:
+        k = _interval_of(t[:-1], sample_t)  # the measured interval holding each interval of q
         # an impact the measured samples show is out, wherever the model puts its limits
-        measured = _interval_of(t[:-1], sample_t)
         for e in stop_impacts(sample_t, _at_samples(q, t, sample_t)):
-            free &= measured != e.i - 1
-    if sample_t is not None and t is not None and not free.all():
+            free &= k != e.i - 1
         # q, v interpolate coarser measured samples: an impact flagged in one measured interval
         # happened somewhere in it, and the interpolant's error spreads to its neighbours
-        k = _interval_of(t[:-1], sample_t)
         bad = np.zeros(len(sample_t) + 1, dtype=bool)
         for j in np.unique(k[~free]):
             bad[max(j - 1, 0): j + 2] = True

@@ -50,7 +50,8 @@ from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks, read_tracks, write_tracks
 from ..model import ArticulatedModel, read_urdf
 from ..stops import stop_impacts
-from .drift import DEFAULT_HORIZONS_S, MASS_SHARE, DriftReport, drift, drift_range, fit_initial_velocity
+from .drift import (DEFAULT_HORIZONS_S, MASS_SHARE, DriftReport, drift, drift_range, fit_initial_velocity, horizon_key,
+                    range_record)
 from .energy import energy_residual, free_segments
 from .forcing import JointRecording, joint_recording
 from .plot import plot_trajectories
@@ -62,9 +63,6 @@ DRIFT_DEFINITION = (
     "the measured pose is its last one, held, and the last applied force is held"
 )
 
-
-def _key(h: float) -> str:
-    return f"{h:g}"
 
 
 def load_reconstruction(out: str | os.PathLike) -> tuple[ArticulatedModel, dict]:
@@ -154,8 +152,9 @@ def impact_broken_spline(times: np.ndarray, q: np.ndarray, t: np.ndarray) -> tup
     q = np.asarray(q, dtype=float).reshape(times.size, -1)
     whole = CubicSpline(times, q, axis=0)
     fine_q, fine_v = whole(t), whole(t, 1)
+    impacts = stop_impacts(times, q)
     for k in range(q.shape[1]):
-        cuts = sorted({e.i for e in stop_impacts(times, q[:, k:k + 1])})
+        cuts = sorted({e.i for e in impacts if e.k == k})
         if not cuts:
             continue
         bounds = [0, *cuts, times.size]
@@ -188,19 +187,19 @@ def replay_check(model: ArticulatedModel, jr: JointRecording, horizons_s=DEFAULT
     residual = energy_residual(model, fine, sample_t=rec.t)
     books = sum(fine.t[b] - fine.t[a] for a, b in free_segments(model, fine.q, fine.v, t=fine.t, sample_t=rec.t))
     out = {
-        "drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
+        "drift_m": {horizon_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
         # None: the motion never leaves the model's stops, so no span has energy books to check
         "energy_residual": None if np.isnan(residual) else float(residual),
         "energy_books_share": float(books / max(fine.t[-1] - fine.t[0], 1e-12)),
         "drift_definition": DRIFT_DEFINITION,
-        "beyond_recording": {_key(h): bool(b) for h, b in zip(report.horizons_s, report.beyond_recording)},
-        "max_drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.max_drift_m)},
-        "joint_rms": {_key(h): float(d) for h, d in zip(report.horizons_s, report.joint_rms)},
+        "beyond_recording": {horizon_key(h): bool(b) for h, b in zip(report.horizons_s, report.beyond_recording)},
+        "max_drift_m": {horizon_key(h): float(d) for h, d in zip(report.horizons_s, report.max_drift_m)},
+        "joint_rms": {horizon_key(h): float(d) for h, d in zip(report.horizons_s, report.joint_rms)},
         "v0": v0.tolist(),
     }
     if with_range:
         spread = drift_range(model, rec, horizons_s, discrete=discrete, forcing=jr.forcing, v0=v0)
-        out["drift_range_m"] = {_key(h): [float(lo), float(hi)] for h, (lo, hi) in zip(report.horizons_s, spread)}
+        out["drift_range_m"] = range_record(report.horizons_s, spread)
         out["drift_range_definition"] = (f"least and largest drift_m over the replays with one moving link's mass "
                                          f"and inertia scaled by 1 ± {MASS_SHARE:g} (a wide range: a knife edge)")
     return out, report

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..io.recording import Recording
 from ..model import ArticulatedModel
-from .drift import DEFAULT_HORIZONS_S, drift, drift_range
+from .drift import DEFAULT_HORIZONS_S, drift, drift_range, horizon_key, range_record
 from .energy import energy_residual, model_ordered
 from .plot import plot_trajectories
 from .simulate import simulate
@@ -28,9 +28,6 @@ FREE_V0 = {"revolute": 1.0, "continuous": 1.0, "helical": 1.0, "prismatic": 0.1}
 """Initial velocity of the conservative check per joint type [rad/s or m/s]."""
 
 
-def _key(h: float) -> str:
-    return f"{h:g}"
-
 
 def energy_text(residual: float | None, fmt: str = ".3g") -> str:
     """An energy residual as printed: ``fmt`` digits, or why there is none (None or NaN: no stretch
@@ -38,6 +35,12 @@ def energy_text(residual: float | None, fmt: str = ".3g") -> str:
     if residual is None or not np.isfinite(residual):
         return "n/a (no stretch of the motion free of the joints' stops to book)"
     return format(residual, fmt)
+
+
+def range_text(ranges: dict, horizon: str) -> str:
+    """ " (least–largest)" of ``ranges`` (a document's ``drift_range_m``) at ``horizon``, or "" when it
+    has none there."""
+    return f" ({ranges[horizon][0]:.3g}–{ranges[horizon][1]:.3g})" if horizon in ranges else ""
 
 
 def verify_recording(
@@ -61,15 +64,15 @@ def verify_recording(
     extra = {}
     if with_range:
         spread = drift_range(model, rec, horizons_s, discrete=discrete)
-        extra["drift_range_m"] = {_key(h): [float(lo), float(hi)] for h, (lo, hi) in zip(report.horizons_s, spread)}
+        extra["drift_range_m"] = range_record(report.horizons_s, spread)
     return {
         "mode": "replay",
         "plant": "discrete_1ms" if discrete else "continuous",
         "recording_duration_s": float(rec.t[-1] - rec.t[0]),
-        "drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
-        "max_drift_m": {_key(h): float(d) for h, d in zip(report.horizons_s, report.max_drift_m)},
-        "joint_rms": {_key(h): float(d) for h, d in zip(report.horizons_s, report.joint_rms)},
-        "beyond_recording": {_key(h): bool(b) for h, b in zip(report.horizons_s, report.beyond_recording)},
+        "drift_m": {horizon_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
+        "max_drift_m": {horizon_key(h): float(d) for h, d in zip(report.horizons_s, report.max_drift_m)},
+        "joint_rms": {horizon_key(h): float(d) for h, d in zip(report.horizons_s, report.joint_rms)},
+        "beyond_recording": {horizon_key(h): bool(b) for h, b in zip(report.horizons_s, report.beyond_recording)},
         "energy_residual": None if np.isnan(residual) else float(residual),
         "plot": Path(plot_path).name,
         **extra,
