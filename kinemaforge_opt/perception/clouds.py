@@ -92,8 +92,10 @@ class TimeCloud:
 def camera_range(cloud: TimeCloud) -> np.ndarray:
     """(M,) distance [m] of each of ``cloud``'s points to the nearest camera of its step (≥ its
     depth: a noise band sized by it errs wide)."""
-    centres = np.array([v.frame.T_world_camera[:3, 3] for v in cloud.views])
-    return np.linalg.norm(cloud.points[:, None, :] - centres[None], axis=2).min(axis=1)
+    nearest = np.full(len(cloud.points), np.inf)  # squared
+    for v in cloud.views:
+        np.minimum(nearest, ((cloud.points - v.frame.T_world_camera[:3, 3]) ** 2).sum(axis=1), out=nearest)
+    return np.sqrt(nearest)
 
 
 def decimated_camera(camera: CameraInfo, stride: int) -> CameraInfo:

@@ -46,6 +46,7 @@ from .solids import fill_part_solids, part_motions
 from .surface import obj_text, part_surface
 
 BASE, ENVIRONMENT = "base", "environment"
+BASE_CODE, ENVIRONMENT_CODE = 0, 1  # their int label codes (label_names)
 # A BASE point whose MAJORITY_NEIGHBOURS nearest points are at least MAJORITY_SHARE environment
 # lies in the environment's surface (_environment_by_majority).
 MAJORITY_NEIGHBOURS = 16
@@ -68,106 +69,121 @@ def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
     except that a part's label then spreads through the non-static BASE points connected to it
     (:func:`_spread_part_labels`) and over the BASE points inside its convex hull
     (:func:`_fill_part_hulls`), and a BASE point among environment points is ENVIRONMENT
-    (:func:`_environment_by_majority`)."""
+    (:func:`_environment_by_majority`).  The steps are labelled in int codes
+    (:func:`label_names`), named at the end."""
+    names = label_names(part_of.values())
+    code_of = {n: i for i, n in enumerate(names)}
 
     def labels_at(s: int) -> np.ndarray:
         c, st = per.clouds[s], per.status[s]
-        labels = np.full(len(c.points), BASE, dtype=object)
+        codes = np.full(len(c.points), BASE_CODE)
         # the band follows the depth noise, not the voxel: 1.5 voxels is 3.5 cm at 160x120 and took
         # in a laptop lying on the floor.
         band = np.minimum(per.environment_band, TEST_SIGMAS * per.noise.sigma(camera_range(c)))
         for plane in per.environment:
-            labels[np.abs(plane.distance(c.points)) <= band] = ENVIRONMENT
+            codes[np.abs(plane.distance(c.points)) <= band] = ENVIRONMENT_CODE
         best = np.full(len(c.points), np.inf)
+        moving = st != STATIC
         for p in per.proposals:
             moved = p.points_at(s)
             if moved is None:
                 continue
-            d = cKDTree(moved).query(c.points, distance_upper_bound=per.inlier_distance, workers=-1)[0]
-            take = (d < best) & (st != STATIC)
-            labels[take] = part_of[p.name]
+            # one thread per query: the steps already run on thread_map's workers
+            d = cKDTree(moved).query(c.points, distance_upper_bound=per.inlier_distance)[0]
+            take = (d < best) & moving
+            codes[take] = code_of[part_of[p.name]]
             best[take] = d[take]
-        labels = _spread_part_labels(c.points, labels, st != STATIC, CLUSTER_VOXELS * per.voxel)
-        labels = _fill_part_hulls(c.points, labels, per.voxel)
-        return _environment_by_majority(c.points, labels)
+        codes = _spread_part_labels(c.points, codes, moving, CLUSTER_VOXELS * per.voxel)
+        codes = _fill_part_hulls(c.points, codes, per.voxel)
+        return names[_environment_by_majority(c.points, codes)]
 
     return thread_map(labels_at, range(len(per.clouds)))
 
 
-def _environment_by_majority(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """(M,) labels with every BASE point whose :data:`MAJORITY_NEIGHBOURS` nearest points are
-    at least :data:`MAJORITY_SHARE` ENVIRONMENT made ENVIRONMENT.
+def label_names(parts) -> np.ndarray:
+    """The names of the int label codes (object array): BASE (:data:`BASE_CODE`), ENVIRONMENT
+    (:data:`ENVIRONMENT_CODE`), then the distinct ``parts`` in name order.  The label helpers
+    below work on codes: comparing object arrays of names cost ~8x more."""
+    return np.array([BASE, ENVIRONMENT, *sorted(set(parts))], dtype=object)
+
+
+def _environment_by_majority(points: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """(M,) label codes with every BASE point whose :data:`MAJORITY_NEIGHBOURS` nearest points
+    are at least :data:`MAJORITY_SHARE` ENVIRONMENT made ENVIRONMENT.
 
     The plane band keeps a reading within 3σ of its range's depth noise (capped): the tail of the
     noise and far-range speckle land outside it as isolated points in the middle of the floor,
     which stayed BASE and counted against the body (protocol_refrigerator_1: body IoU 0.85 -> 0.95
     with the vote; protocol_drawer_0 0.84 -> 0.88).  A surface of the object meeting the floor
     keeps its own points among its neighbours."""
-    base = np.flatnonzero(labels == BASE)
-    env = labels == ENVIRONMENT
+    base = np.flatnonzero(codes == BASE_CODE)
+    env = codes == ENVIRONMENT_CODE
     if not base.size or not env.any() or len(points) <= MAJORITY_NEIGHBOURS:
-        return labels
-    neighbours = cKDTree(points).query(points[base], MAJORITY_NEIGHBOURS + 1, workers=-1)[1][:, 1:]  # without itself
-    out = labels.copy()
-    out[base[env[neighbours].mean(axis=1) >= MAJORITY_SHARE]] = ENVIRONMENT
+        return codes
+    neighbours = cKDTree(points).query(points[base], MAJORITY_NEIGHBOURS + 1)[1][:, 1:]  # without itself
+    out = codes.copy()
+    out[base[env[neighbours].mean(axis=1) >= MAJORITY_SHARE]] = ENVIRONMENT_CODE
     return out
 
 
-def _fill_part_hulls(points: np.ndarray, labels: np.ndarray, margin: float) -> np.ndarray:
-    """(M,) labels with every BASE point that lies inside a part's convex hull (the hull of that
-    part's points at this step), deeper than ``margin`` [m] (the cloud's voxel: nearer the hull's
-    faces a point is at its resolution's mercy), given that part's label; a point inside several
-    hulls takes the part with the nearest point.
+def _fill_part_hulls(points: np.ndarray, codes: np.ndarray, margin: float) -> np.ndarray:
+    """(M,) label codes with every BASE point that lies inside a part's convex hull (the hull of
+    that part's points at this step), deeper than ``margin`` [m] (the cloud's voxel: nearer the
+    hull's faces a point is at its resolution's mercy), given that part's code; a point inside
+    several hulls takes the part with the nearest point.
 
     A rigid part is a solid: what is seen inside its hull is its own inside — a drawer's floor and
     inner walls seen through its open top.  Those slide along themselves as it moves, so the
     free-space test reads them static (the label spreading leaves static points alone) and they
     stayed BASE: ~5000 pixels per step of an open drawer on protocol_drawer_0."""
-    base = np.flatnonzero(labels == BASE)
-    out = labels.copy()
+    base = np.flatnonzero(codes == BASE_CODE)
+    out = codes.copy()
     if not base.size:
         return out
     nearest = np.full(base.size, np.inf)
-    for name in sorted(set(labels.tolist()) - {BASE, ENVIRONMENT}):
-        part = points[labels == name]
+    on_base = points[base]
+    for code in np.unique(codes[codes > ENVIRONMENT_CODE]):
+        part = points[codes == code]
         try:
             faces = ConvexHull(part).equations  # (F, 4): outward unit normal, offset
         except (QhullError, ValueError):  # too few or coplanar points: no volume to fill
             continue
-        inside = np.flatnonzero(np.all(points[base] @ faces[:, :3].T + faces[:, 3] <= -margin, axis=1))
+        # the hull lies in the part's bounding box: only the points in that box are tested
+        in_box = np.flatnonzero(np.all((on_base > part.min(axis=0)) & (on_base < part.max(axis=0)), axis=1))
+        inside = in_box[np.all(on_base[in_box] @ faces[:, :3].T + faces[:, 3] <= -margin, axis=1)]
         if not inside.size:
             continue
-        d = cKDTree(part).query(points[base[inside]], workers=-1)[0]
+        d = cKDTree(part).query(on_base[inside])[0]
         take = d < nearest[inside]
-        out[base[inside[take]]] = name
+        out[base[inside[take]]] = code
         nearest[inside[take]] = d[take]
     return out
 
 
-def _spread_part_labels(points: np.ndarray, labels: np.ndarray, unsettled: np.ndarray, reach: float) -> np.ndarray:
-    """(M,) labels with every non-static (``unsettled``) BASE point that is connected to a part's
-    points — through such points, each link shorter than ``reach`` [m], the proposals' clustering
-    distance — given the label of the nearest part point of its connected group.
+def _spread_part_labels(points: np.ndarray, codes: np.ndarray, unsettled: np.ndarray, reach: float) -> np.ndarray:
+    """(M,) label codes with every non-static (``unsettled``) BASE point that is connected to a
+    part's points — through such points, each link shorter than ``reach`` [m], the proposals'
+    clustering distance — given the code of the nearest part point of its connected group.
 
     A proposal holds the points seen when it was made (and grown), so a surface a part reveals as
     it moves — a drawer's floor and inner walls once it is open — is no proposal's and would stay
     BASE, while its readings change from step to step like the part's own.  Static points are
     left alone: they are what keeps the body's rim, next to a part across a gap of millimetres,
     out of the part."""
-    on_part = (labels != BASE) & (labels != ENVIRONMENT)
-    free = (labels == BASE) & unsettled
+    on_part = codes > ENVIRONMENT_CODE
+    free = (codes == BASE_CODE) & unsettled
     if not on_part.any() or not free.any():
-        return labels
+        return codes
     idx = np.flatnonzero(on_part | free)
     pairs = cKDTree(points[idx]).query_pairs(reach, output_type="ndarray")
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(idx.size, idx.size))
     n_groups, group = connected_components(graph, directed=False)
     anchored = np.bincount(group[on_part[idx]], minlength=n_groups) > 0
-    out = labels.copy()
+    out = codes.copy()
     for g in np.flatnonzero(anchored & (np.bincount(group[free[idx]], minlength=n_groups) > 0)):
         members = idx[group == g]
         anchors, joined = members[on_part[members]], members[free[members]]
-        out[joined] = labels[anchors][cKDTree(points[anchors]).query(points[joined], workers=-1)[1]]
+        out[joined] = codes[anchors][cKDTree(points[anchors]).query(points[joined])[1]]
     return out
 
 

@@ -56,12 +56,17 @@ def test_environment_pixels_get_the_environment_label(fridge):
     assert counts.get(("base", "body"), 0) >= 0.85 * body
 
 
+def _codes(labels: np.ndarray, names: np.ndarray) -> np.ndarray:
+    """Part names -> the int label codes the label helpers work on (names: label_names)."""
+    return np.array([list(names).index(n) for n in labels])
+
+
 def test_a_part_label_spreads_over_the_unsettled_points_it_touches_and_no_further():
     """A drawer's front is labelled by its proposal; the floor it reveals when open (non-static,
     touching the front) joins it; the body's rim beside it (static, 4 mm away) and a non-static
     patch 10 cm off (touching nothing labelled) stay base; where two parts share one connected
     group, each point takes its nearest part."""
-    from kinemaforge_opt.perception.reconstruct import BASE, ENVIRONMENT, _spread_part_labels
+    from kinemaforge_opt.perception.reconstruct import BASE, ENVIRONMENT, _spread_part_labels, label_names
 
     step = 0.005
     grid = np.stack(np.meshgrid(np.arange(0, 0.2, step), np.arange(0, 0.1, step)), -1).reshape(-1, 2)
@@ -78,13 +83,14 @@ def test_a_part_label_spreads_over_the_unsettled_points_it_touches_and_no_furthe
     labels[3 * n] = ENVIRONMENT  # an environment point is never relabelled
     unsettled = np.ones(len(points), dtype=bool)
     unsettled[2 * n:3 * n] = False  # the rim is static
-    out = _spread_part_labels(points, labels, unsettled, reach=2 * step)
+    names = label_names(["p0", "p1"])
+    out = names[_spread_part_labels(points, _codes(labels, names), unsettled, reach=2 * step)]
     assert (out[n:2 * n] == "p0").all()  # the revealed floor (nearer p0's front than p1's)
     assert (out[2 * n:3 * n] == BASE).all()
     assert out[3 * n] == ENVIRONMENT and (out[3 * n + 1:3 * n + 50] == BASE).all()
     assert (out[:n] == "p0").all() and (out[-n:] == "p1").all()
     # nothing labelled, nothing to spread
-    assert (_spread_part_labels(points, np.full(len(points), BASE, dtype=object), unsettled, 2 * step) == BASE).all()
+    assert (names[_spread_part_labels(points, np.zeros(len(points), dtype=int), unsettled, 2 * step)] == BASE).all()
 
 
 def test_base_points_inside_a_parts_hull_join_it_and_its_neighbours_stay():
@@ -93,7 +99,7 @@ def test_base_points_inside_a_parts_hull_join_it_and_its_neighbours_stay():
     and join it; the cabinet's wall 2 cm beside the drawer, a rim point within one voxel of the
     hull's face, environment points inside it, and anything of a flat second part (no volume)
     are left as they were."""
-    from kinemaforge_opt.perception.reconstruct import BASE, ENVIRONMENT, _fill_part_hulls
+    from kinemaforge_opt.perception.reconstruct import BASE, ENVIRONMENT, _fill_part_hulls, label_names
 
     step, voxel = 0.01, 0.005
     xs, ys, zs = np.arange(0, 0.3001, step), np.arange(0, 0.2001, step), np.arange(0, 0.1001, step)
@@ -111,7 +117,8 @@ def test_base_points_inside_a_parts_hull_join_it_and_its_neighbours_stay():
     labels[n[0]:n[2]] = "p0"
     labels[n[6]] = ENVIRONMENT
     labels[n[7]:] = "p1"
-    out = _fill_part_hulls(points, labels, voxel)
+    names = label_names(["p0", "p1"])
+    out = names[_fill_part_hulls(points, _codes(labels, names), voxel)]
     assert (out[n[2]:n[4]] == "p0").all()  # floor and inner wall joined
     assert (out[n[4]:n[5]] == BASE).all() and out[n[5]] == BASE  # cabinet wall, rim point
     assert out[n[6]] == ENVIRONMENT and (out[n[7]:] == "p1").all() and (out[:n[2]] == "p0").all()
@@ -122,7 +129,7 @@ def test_base_speckle_amid_the_floor_becomes_environment_and_the_body_on_it_stay
     middle (noise beyond the plane band) and a 0.2 m box standing on it (BASE, its bottom row
     touching the floor): the readings become environment, every point of the box stays base, and
     a part's point amid the floor keeps its part."""
-    from kinemaforge_opt.perception.reconstruct import BASE, ENVIRONMENT, _environment_by_majority
+    from kinemaforge_opt.perception.reconstruct import BASE, ENVIRONMENT, _environment_by_majority, label_names
 
     g = np.arange(0, 1.0001, 0.01)
     floor = np.array([[x, y, 0.0] for x in g for y in g])
@@ -134,7 +141,8 @@ def test_base_speckle_amid_the_floor_becomes_environment_and_the_body_on_it_stay
     part = np.array([[0.8, 0.2, 0.01]])
     points = np.concatenate([floor, speckle, box, part])
     labels = np.array([ENVIRONMENT] * len(floor) + [BASE] * (len(speckle) + len(box)) + ["p0"], dtype=object)
-    out = _environment_by_majority(points, labels)
+    names = label_names(["p0"])
+    out = names[_environment_by_majority(points, _codes(labels, names))]
     n = len(floor)
     assert (out[n:n + 5] == ENVIRONMENT).all()
     assert (out[n + 5:-1] == BASE).all()
