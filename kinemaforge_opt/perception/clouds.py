@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -87,6 +88,12 @@ class TimeCloud:
     views: tuple[FrameCloud, ...]
     points: np.ndarray
     sightlines: np.ndarray
+
+    @cached_property
+    def tree(self) -> cKDTree:
+        """KD-tree of ``points``, built on first use and kept: the tracker, the point labels and
+        the mass test each search every step's cloud."""
+        return cKDTree(self.points)
 
 
 def camera_range(cloud: TimeCloud) -> np.ndarray:

@@ -67,19 +67,20 @@ class MassProperties:
     method: str
 
 
-def moving_point_masks(points_world: list[np.ndarray], clouds_world: list[np.ndarray],
+def moving_point_masks(points_world: list[np.ndarray], clouds_world: list[np.ndarray | cKDTree],
                        Ts_world_part: list[np.ndarray | None], radius: float) -> list[np.ndarray]:
     """Per time step, a (M_s,) bool mask of the part's points that behave like the part.
 
     points_world: per step s the part's labelled points (M_s, 3) in the world [m].  clouds_world:
-    per step the whole observed cloud (N_s, 3) [m].  Ts_world_part: per step the part pose (4, 4)
-    or None where it is not tracked.  radius: the distance [m] within which a point lies on an
-    observed surface (the ICP inlier distance).  See the module doc for the test."""
+    per step the whole observed cloud (N_s, 3) [m], or its cKDTree when already built.
+    Ts_world_part: per step the part pose (4, 4) or None where it is not tracked.  radius: the
+    distance [m] within which a point lies on an observed surface (the ICP inlier distance).  See
+    the module doc for the test."""
     T = len(points_world)
     if not (len(clouds_world) == len(Ts_world_part) == T):
         raise DataError(f"moving_point_masks: {T} point sets, {len(clouds_world)} clouds and "
                         f"{len(Ts_world_part)} poses; one of each per time step was expected")
-    trees = thread_map(lambda c: cKDTree(c) if len(c) else None, clouds_world)
+    trees = thread_map(lambda c: c if isinstance(c, cKDTree) else cKDTree(c) if len(c) else None, clouds_world)
 
     def mask(s: int) -> np.ndarray:
         X = np.asarray(points_world[s], dtype=float).reshape(-1, 3)

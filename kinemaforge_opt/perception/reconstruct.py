@@ -95,7 +95,7 @@ def point_labels(per: Perception, part_of: dict[str, str]) -> list[np.ndarray]:
             best[take] = d[take]
         codes = _spread_part_labels(c.points, codes, moving, CLUSTER_VOXELS * per.voxel)
         codes = _fill_part_hulls(c.points, codes, per.voxel)
-        return names[_environment_by_majority(c.points, codes)]
+        return names[_environment_by_majority(c.points, codes, c.tree)]
 
     return thread_map(labels_at, range(len(per.clouds)))
 
@@ -107,9 +107,10 @@ def label_names(parts) -> np.ndarray:
     return np.array([BASE, ENVIRONMENT, *sorted(set(parts))], dtype=object)
 
 
-def _environment_by_majority(points: np.ndarray, codes: np.ndarray) -> np.ndarray:
+def _environment_by_majority(points: np.ndarray, codes: np.ndarray, tree: cKDTree | None = None) -> np.ndarray:
     """(M,) label codes with every BASE point whose :data:`MAJORITY_NEIGHBOURS` nearest points
-    are at least :data:`MAJORITY_SHARE` ENVIRONMENT made ENVIRONMENT.
+    are at least :data:`MAJORITY_SHARE` ENVIRONMENT made ENVIRONMENT (``tree``: the points'
+    KD-tree, when already built).
 
     The plane band keeps a reading within 3σ of its range's depth noise (capped): the tail of the
     noise and far-range speckle land outside it as isolated points in the middle of the floor,
@@ -120,7 +121,8 @@ def _environment_by_majority(points: np.ndarray, codes: np.ndarray) -> np.ndarra
     env = codes == ENVIRONMENT_CODE
     if not base.size or not env.any() or len(points) <= MAJORITY_NEIGHBOURS:
         return codes
-    neighbours = cKDTree(points).query(points[base], MAJORITY_NEIGHBOURS + 1)[1][:, 1:]  # without itself
+    tree = cKDTree(points) if tree is None else tree
+    neighbours = tree.query(points[base], MAJORITY_NEIGHBOURS + 1)[1][:, 1:]  # without itself
     out = codes.copy()
     out[base[env[neighbours].mean(axis=1) >= MAJORITY_SHARE]] = ENVIRONMENT_CODE
     return out
@@ -201,8 +203,7 @@ def pixel_labels(per: Perception, labels: list[np.ndarray], seq=None) -> dict[in
             own = relabel_contact_by_colour(v.pixels, own, v.stride, seq.read_rgb(v.frame), ENVIRONMENT)
         return v.frame.index, (v.pixels, own)
 
-    trees = thread_map(lambda c: cKDTree(c.points), per.clouds)
-    items = [(v, lab, tree) for c, lab, tree in zip(per.clouds, labels, trees) for v in c.views]
+    items = [(v, lab, c.tree) for c, lab in zip(per.clouds, labels) for v in c.views]
     return dict(thread_map(frame_labels, items))
 
 
@@ -284,7 +285,7 @@ def part_masses(per: Perception, reps: dict[str, int], labels: list[np.ndarray],
     and ``density`` [kg/m³], not on where the joints are, so the model rebuilt on the NLP's joints
     reuses them."""
     tracks = per.tracks
-    clouds_t = [c.points for c in per.clouds]
+    clouds_t = [c.tree if len(c.points) else c.points for c in per.clouds]
     out = {}
     for p, k in reps.items():
         Ts = [tracks.Ts_world_track(k)[s] if tracks.observed()[k, s] else None for s in range(tracks.times.size)]

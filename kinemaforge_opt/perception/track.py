@@ -377,7 +377,6 @@ class Tracker:
         self.plane_band = ICP_FINE_VOXELS * voxel if plane_band is None else plane_band
         self.set_targets([c.points[s != STATIC] for c, s in zip(clouds, status)])
         self._windows: dict[int, list[np.ndarray]] = {}
-        self._full_trees: dict[int, cKDTree] = {}
         self._moving_clusters: dict[int, list[np.ndarray]] = {}
         self.min_points = max(MIN_PROPOSAL_POINTS, int(MIN_PART_AREA / voxel**2))
 
@@ -387,10 +386,8 @@ class Tracker:
         self.trees = thread_map(lambda t: cKDTree(t) if len(t) else None, targets)
 
     def full_tree(self, s: int) -> cKDTree:
-        """KD-tree of every fused point at step s (built on first use)."""
-        if s not in self._full_trees:
-            self._full_trees[s] = cKDTree(self.clouds[s].points)
-        return self._full_trees[s]
+        """KD-tree of every fused point at step s (the cloud's own, built on first use)."""
+        return self.clouds[s].tree
 
     def windows(self, s: int) -> list[np.ndarray]:
         if s not in self._windows:

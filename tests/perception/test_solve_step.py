@@ -40,7 +40,9 @@ class _Scripted(Tracker):
         surface = FRONT @ TRUE[:3, :3].T + TRUE[:3, 3]
         self.voxel, self.coarse, self.fine_starts = VOXEL, coarse, []
         self.targets, self.trees = [surface] * 2, [cKDTree(surface)] * 2
-        self._full_trees = {1: self.trees[1]}
+
+    def full_tree(self, s):
+        return self.trees[s]
 
     def verdicts(self, points, s):
         near = self.trees[s].query(points, distance_upper_bound=TAU)[0] < np.inf
