@@ -508,7 +508,8 @@ def _with_part_solids(per: Perception, labels: list[np.ndarray], model: Articula
                       q: np.ndarray) -> list[np.ndarray]:
     """``labels`` with each moving part's solid over the motion ``q`` (T, n) filled
     (:func:`solids.fill_part_solids`, margin one voxel)."""
-    return fill_part_solids([c.points for c in per.clouds], labels, part_motions(model, q), per.voxel, BASE)
+    return fill_part_solids([c.points for c in per.clouds], labels, part_motions(model, q), per.voxel, BASE,
+                            [c.tree for c in per.clouds])
 
 
 def supported_screws(per: Perception, graph: GraphResult, seq, density: float, name: str,

@@ -38,7 +38,7 @@ def part_motions(model: ArticulatedModel, q: np.ndarray) -> dict[str, np.ndarray
 
 
 def fill_part_solids(points: list[np.ndarray], labels: list[np.ndarray], motions: dict[str, np.ndarray],
-                     margin: float, base: str) -> list[np.ndarray]:
+                     margin: float, base: str, trees: list[cKDTree] | None = None) -> list[np.ndarray]:
     """Per step, (M_t,) labels with the ``base`` points inside a moving part's solid given that
     part's name.
 
@@ -48,14 +48,15 @@ def fill_part_solids(points: list[np.ndarray], labels: list[np.ndarray], motions
     beyond it.  The solid is the convex hull of the part's points of every step with a finite
     motion, moved to the zero configuration; a point inside several solids takes the part whose
     hull point is nearest.  A candidate is refused when something is seen at its place (within
-    ``margin``) at ≥ :data:`STATIC_SHARE` of the steps where the moved solid is clearly elsewhere."""
+    ``margin``) at ≥ :data:`STATIC_SHARE` of the steps where the moved solid is clearly elsewhere.
+    trees: per step the KD-tree of ``points``, when already built."""
     if len(labels) != len(points):
         raise ValueError(f"labels has {len(labels)} steps, points {len(points)}")
     for part, T in motions.items():
         if np.shape(T) != (len(points), 4, 4):
             raise ValueError(f"motion of part {part!r} has shape {np.shape(T)}; expected ({len(points)}, 4, 4), "
                              "one pose per step of points")
-    trees = thread_map(cKDTree, points)
+    trees = thread_map(cKDTree, points) if trees is None else trees
     out = [lab.copy() for lab in labels]
     nearest = [np.full(len(lab), np.inf) for lab in labels]
     for part, T in sorted(motions.items()):
@@ -72,11 +73,12 @@ def fill_part_solids(points: list[np.ndarray], labels: list[np.ndarray], motions
             """(N,) largest face distance of world points x at step s (< 0 inside the solid)."""
             return (transform_points(T_inv[s], x) @ faces[:, :3].T + faces[:, 3]).max(axis=1)
 
-        for s in valid:
+        def fill_step(s: int) -> None:
+            """This part's solid at step s: writes out[s] and nearest[s] only, so steps run in parallel."""
             cand = np.flatnonzero(labels[s] == base)
             cand = cand[depth_outside(points[s][cand], s) < -margin]
             if not cand.size:
-                continue
+                return
             x = points[s][cand]
             outside_steps, seen_steps = np.zeros(cand.size), np.zeros(cand.size)
             for k in valid:
@@ -86,8 +88,10 @@ def fill_part_solids(points: list[np.ndarray], labels: list[np.ndarray], motions
                 outside_steps += away
                 seen_steps += away & np.isfinite(trees[k].query(x, distance_upper_bound=margin)[0])
             cand = cand[(outside_steps == 0) | (seen_steps < STATIC_SHARE * outside_steps)]
-            d = union_tree.query(transform_points(T_inv[s], points[s][cand]), workers=-1)[0]
+            d = union_tree.query(transform_points(T_inv[s], points[s][cand]))[0]
             take = d < nearest[s][cand]
             out[s][cand[take]] = part
             nearest[s][cand[take]] = d[take]
+
+        thread_map(fill_step, valid)
     return out
