@@ -242,21 +242,24 @@ def fuse(t: float, views: list[FrameCloud], voxel: float, coarse: float | None =
     without it, everything is fused at ``voxel`` and the status is UNKNOWN."""
     from .change import MOVING, STATIC, UNKNOWN
 
-    # positions and unit sightlines side by side, so that fusion averages both over each voxel
-    pts = np.concatenate([np.hstack([v.points_world, _unit_rows(v.frame.T_world_camera[:3, 3] - v.points_world)])
-                          for v in views]) if views else np.zeros((0, 6))
+    def rows(v: FrameCloud, keep: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(N, 6) positions and unit sightlines of a view's kept points side by side, so that
+        fusion averages both over each voxel."""
+        x = v.points_world[keep]
+        return np.hstack([x, _unit_rows(v.frame.T_world_camera[:3, 3] - x)])
+
     if any(v.status is None for v in views):
-        fused = downsample(pts, voxel, outliers=True)
+        fused = downsample(np.concatenate([rows(v) for v in views]) if views else np.zeros((0, 6)), voxel, outliers=True)
         return _time_cloud(t, views, fused), np.full(len(fused), UNKNOWN, dtype=np.int8)
-    st = np.concatenate([v.status for v in views])
+    keeps = [slice(None)] * len(views)
     if coarse is not None and coarse >= 2 * voxel:
         # static pixels are sampled on the coarse grid first (each view then gives about one
         # static sample per coarse voxel, as the moving ones do per voxel)
         k = int(coarse / voxel)
-        on_grid = np.concatenate([((v.pixels[:, 0] // v.stride) % k == 0) & ((v.pixels[:, 1] // v.stride) % k == 0)
-                                  for v in views])
-        keep = (st != STATIC) | on_grid
-        pts, st = pts[keep], st[keep]
+        keeps = [(v.status != STATIC) | (((v.pixels[:, 0] // v.stride) % k == 0) & ((v.pixels[:, 1] // v.stride) % k == 0))
+                 for v in views]
+    pts = np.concatenate([rows(v, keep) for v, keep in zip(views, keeps)]) if views else np.zeros((0, 6))
+    st = np.concatenate([v.status[keep] for v, keep in zip(views, keeps)]) if views else np.zeros(0, dtype=np.int8)
     parts, status = [], []
     for code, size, outl in ((MOVING, voxel, True), (UNKNOWN, voxel, True), (STATIC, coarse or voxel, False)):
         p = downsample(pts[st == code], size, outliers=outl)
