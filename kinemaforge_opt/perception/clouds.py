@@ -27,6 +27,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import DataError
 from ..io.sequence import CameraInfo, Frame, Sequence
+from ..parallel import thread_map
 
 # A second difference of inverse depth further than this many σ from zero is a depth edge
 # (a discontinuity or a crease), not noise: a 5σ two-sided test flags ~1e-6 of noise pixels.
@@ -179,7 +180,8 @@ def frame_cloud(seq: Sequence, frame: Frame, noise: DepthNoise, depth: np.ndarra
 
 def footprint(seq: Sequence, depths: list[np.ndarray]) -> float:
     """Median full-resolution pixel footprint z/f [m] over the images."""
-    foot = [np.nanmedian(d) / seq.cameras[f.camera].fx for f, d in zip(seq.frames, depths) if np.isfinite(d).any()]
+    medians = thread_map(lambda d: np.nanmedian(d) if np.isfinite(d).any() else np.nan, depths)
+    foot = [m / seq.cameras[f.camera].fx for f, m in zip(seq.frames, medians) if np.isfinite(m)]
     if not foot:
         raise DataError(f"{seq.root}: no depth image holds a valid reading")
     return float(np.median(foot))
