@@ -223,9 +223,10 @@ def downsample(points: np.ndarray, voxel: float, outliers: bool = False) -> np.n
     if outliers and len(out) > OUTLIER_MIN_NEIGHBOURS:
         # a centroid is kept when its OUTLIER_MIN_NEIGHBOURS nearest others are all within the
         # radius (a k-nearest query with a distance bound: 3x cheaper than counting every
-        # neighbour with query_ball_point, the same decision)
+        # neighbour with query_ball_point, the same decision); one thread: fuse and seed_order
+        # call this on thread_map's workers
         d = cKDTree(out[:, :3]).query(out[:, :3], k=[OUTLIER_MIN_NEIGHBOURS + 1],
-                                      distance_upper_bound=OUTLIER_RADIUS_VOXELS * voxel, workers=-1)[0]
+                                      distance_upper_bound=OUTLIER_RADIUS_VOXELS * voxel)[0]
         out = out[np.isfinite(d[:, 0])]  # the nearest "neighbour" is the point itself
     return out
 
