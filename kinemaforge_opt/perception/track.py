@@ -839,15 +839,28 @@ def static_explains(tracker: Tracker, frag: Proposal) -> bool:
     return still >= confirmed(tracker, x, frag, frag.ref, np.array(moved)) - (1.0 - COMOVING_SHARE)
 
 
-def absorb(p: Proposal, frag: Proposal, anchor: int, failed: list[int] = ()) -> Proposal:
+def absorb(tracker: Tracker, p: Proposal, frag: Proposal, anchor: int, failed: list[int] = ()) -> Proposal:
     """``p`` with ``frag``'s points, carried to ``p``'s reference through the ``anchor`` step both
     observe; ``p``'s motion kept (the fragment's own track is the one not trusted) except at the
     ``failed`` steps, where it put the fragment's points where the images contradict them: there
     ``p``'s track failed, and ``p`` is unobserved (not at its reference, where its motion is the
-    identity, nor at the anchor, where the fragment's own pose is what was judged)."""
+    identity, nor at the anchor, where the fragment's own pose is what was judged).
+
+    At the steps ``p``'s track never reached and the fragment's did, the fragment's motion
+    (continued from ``p``'s pose at the anchor) is taken where the images accept the merged points
+    there (:func:`acceptable`): a door tracked from its inner face, seen only once it is open, lost
+    the first three steps of protocol_microwave_1@s1 while its outer face, seeded near shut, held
+    them (the energy books then started mid-push)."""
     Ts = p.Ts_delta.copy()
+    gap = np.flatnonzero(~np.isfinite(Ts[:, 0, 0]) & np.isfinite(frag.Ts_delta[:, 0, 0]))
     Ts[[s for s in failed if s not in (p.ref, anchor)]] = np.nan
-    return Proposal(p.name, p.ref, _points_with(p, frag, anchor), Ts)
+    points = _points_with(p, frag, anchor)
+    sample = tracking_subset(points)
+    for s in gap:
+        T = frag.Ts_delta[s] @ np.linalg.inv(frag.Ts_delta[anchor]) @ p.Ts_delta[anchor]
+        if acceptable(*tracker.verify(transform_points(T, sample), int(s))):
+            Ts[s] = T
+    return Proposal(p.name, p.ref, points, Ts)
 
 
 def verdict_counts(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
@@ -921,7 +934,7 @@ def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposa
             continue
         k, a, failed = explained_by(tracker, frag, out)
         if k is not None:
-            out[k] = absorb(out[k], frag, a, failed)
+            out[k] = absorb(tracker, out[k], frag, a, failed)
             out = [p for p in out if p is not frag]
             continue
         k, a = coincident_with(tracker, frag, out)
@@ -931,13 +944,13 @@ def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposa
             # 1 - COMOVING_SHARE that nothing ties to the part); or, when the covered one's motion
             # wins, that one with both point sets, less what its motion contradicts
             if union_fit(tracker, other, frag, frag, a) > union_fit(tracker, other, frag, other, a):
-                out[k] = absorb(frag, without_contradicted(tracker, other, frag, a), a)
+                out[k] = absorb(tracker, frag, without_contradicted(tracker, other, frag, a), a)
             out = [p for p in out if p is not frag]
         else:
             pieces = explained_in_pieces(tracker, frag, out)
             for k, piece, a, failed in pieces or []:
                 if k is not None:  # a base piece is dropped: its points are the base's
-                    out[k] = absorb(out[k], piece, a, failed)
+                    out[k] = absorb(tracker, out[k], piece, a, failed)
             if pieces is not None:
                 out = [p for p in out if p is not frag]
     return out

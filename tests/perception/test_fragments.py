@@ -102,7 +102,7 @@ def test_absorb_carries_points_through_the_anchor_step():
     ya = _stroke(0)
     part = Proposal("p", 2, np.zeros((1, 3)), _motion(ya, 2))
     frag = Proposal("f", 6, np.array([[0.0, 0.0, 0.0]]), _motion(ya, 6))  # one point, at step 6
-    out = absorb(part, frag, 6)
+    out = absorb(_Oracle([np.zeros((1, 3))] * STEPS), part, frag, 6)
     # the point at step 6 is at the origin; the part moved by ya[6] - ya[2] between its reference and 6
     np.testing.assert_allclose(out.points[1], [0.0, ya[6] - ya[2], 0.0], atol=1e-12)
 
