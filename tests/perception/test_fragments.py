@@ -107,6 +107,27 @@ def test_absorb_carries_points_through_the_anchor_step():
     np.testing.assert_allclose(out.points[1], [0.0, ya[6] - ya[2], 0.0], atol=1e-12)
 
 
+def test_absorb_fills_the_steps_only_the_fragment_reached_where_the_images_accept_them():
+    """Drawer A's front tracked from step 4 lost steps 0-2 (a face seen only later, as a door's
+    inner side); its side wall, tracked truly at every step, is absorbed: the front's track takes
+    the wall's motion at those steps, as the true one.  Where the wall's own track is wrong (6 cm
+    up at step 1), the images refuse the merged points there and the step stays unobserved; the
+    steps the front did observe keep its motion."""
+    oracle, (front_a, _, _), wall_true, ya = _scene()
+    lost = front_a.Ts_delta.copy()
+    lost[:3] = np.nan
+    front = Proposal("front_a", 4, front_a.points, lost)
+    wall = Proposal("wall", 4, wall_true - [0.0, ya[4], 0.0], _motion(ya, 4))
+    out = absorb(oracle, front, wall, 4)
+    np.testing.assert_allclose(out.Ts_delta, front_a.Ts_delta, atol=1e-12)
+    wrong = wall.Ts_delta.copy()
+    wrong[1, 2, 3] += 0.06
+    out = absorb(oracle, front, Proposal("wall", 4, wall.points, wrong), 4)
+    assert np.isnan(out.Ts_delta[1]).all()
+    np.testing.assert_allclose(out.Ts_delta[[0, 2]], front_a.Ts_delta[[0, 2]], atol=1e-12)
+    np.testing.assert_array_equal(out.Ts_delta[3:], front_a.Ts_delta[3:])
+
+
 def test_a_part_track_that_fails_at_one_step_still_explains_its_wall_and_loses_that_step():
     """The drawer's own track jumps 6 cm up at one step of 16 (a glitch the tracker let through):
     the wall's points land in the air there, so that step is unobserved after the merge."""
