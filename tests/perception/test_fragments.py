@@ -131,20 +131,6 @@ def test_absorb_fills_the_steps_only_the_fragment_reached_where_the_images_accep
     np.testing.assert_array_equal(out.Ts_delta[3:], front_a.Ts_delta[3:])
 
 
-def test_absorb_takes_the_fragments_pose_where_the_merged_points_fit_it_better():
-    """Drawer A's front tracked 5 cm too far out at step 6 (pulled along by a neighbour); its side
-    wall, tracked truly, is absorbed: at step 6 the merged points lie on the observed surfaces with
-    the wall's motion and off them with the front's, so the track takes the wall's pose there and
-    keeps its own elsewhere."""
-    oracle, (front_a, _, _), wall_true, ya = _scene()
-    off = front_a.Ts_delta.copy()
-    off[6, 1, 3] -= 0.05
-    front = Proposal("front_a", 4, front_a.points, off)
-    wall = Proposal("wall", 4, wall_true - [0.0, ya[4], 0.0], _motion(ya, 4))
-    out = absorb(oracle, front, wall, 4)
-    np.testing.assert_allclose(out.Ts_delta, front_a.Ts_delta, atol=1e-12)
-
-
 def test_a_part_track_that_fails_at_one_step_still_explains_its_wall_and_loses_that_step():
     """The drawer's own track jumps 6 cm up at one step of 16 (a glitch the tracker let through):
     the wall's points land in the air there, so that step is unobserved after the merge."""
