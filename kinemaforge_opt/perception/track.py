@@ -846,29 +846,20 @@ def absorb(tracker: Tracker, p: Proposal, frag: Proposal, anchor: int, failed: l
     ``p``'s track failed, and ``p`` is unobserved (not at its reference, where its motion is the
     identity, nor at the anchor, where the fragment's own pose is what was judged).
 
-    Elsewhere the fragment's motion (continued from ``p``'s pose at the anchor) stands in for
-    ``p``'s step by step, judged on the merged points: where ``p`` has no pose, it is taken if the
-    images accept it (:func:`acceptable`) — a door tracked from its inner face, seen only once it is
-    open, lost the first three steps of protocol_microwave_1@s1 while its outer face, seeded near
-    shut, held them; where both have one more than a voxel apart, it is taken if it fits better
-    beyond FIT_TIE_SIGMAS (:meth:`Tracker.fit`, as :meth:`Tracker.solve_step` ranks poses) —
-    protocol_moving_cabinet's shut right door, tracked open 0.2–0.5 rad at four steps while the
-    left one swung past it, fitted 0.07–0.15 there and 0.26–0.65 with its fragment's motion."""
+    At the steps ``p``'s track never reached and the fragment's did, the fragment's motion
+    (continued from ``p``'s pose at the anchor) is taken where the images accept the merged points
+    there (:func:`acceptable`): a door tracked from its inner face, seen only once it is open, lost
+    the first three steps of protocol_microwave_1@s1 while its outer face, seeded near shut, held
+    them (the energy books then started mid-push)."""
     Ts = p.Ts_delta.copy()
+    gap = np.flatnonzero(~np.isfinite(Ts[:, 0, 0]) & np.isfinite(frag.Ts_delta[:, 0, 0]))
     Ts[[s for s in failed if s not in (p.ref, anchor)]] = np.nan
     points = _points_with(p, frag, anchor)
     sample = tracking_subset(points)
-    for s in np.flatnonzero(np.isfinite(frag.Ts_delta[:, 0, 0])):
-        if s in (p.ref, anchor):
-            continue
+    for s in gap:
         T = frag.Ts_delta[s] @ np.linalg.inv(frag.Ts_delta[anchor]) @ p.Ts_delta[anchor]
-        if not np.isfinite(Ts[s, 0, 0]):
-            if acceptable(*tracker.verify(transform_points(T, sample), int(s))):
-                Ts[s] = T
-        elif displacement(T, Ts[s], sample) > tracker.voxel:
-            kept, other = (tracker.fit(transform_points(X, sample), int(s)) for X in (Ts[s], T))
-            if other > kept + FIT_TIE_SIGMAS * np.sqrt(max(other * (1.0 - other), 0.0) / len(sample)):
-                Ts[s] = T
+        if acceptable(*tracker.verify(transform_points(T, sample), int(s))):
+            Ts[s] = T
     return Proposal(p.name, p.ref, points, Ts)
 
 

@@ -61,9 +61,6 @@ class _Oracle(Tracker):
         on, seen_through = self.verdicts(points, s)
         return float(np.mean(on)), float(np.mean(seen_through))
 
-    def full_tree(self, s):
-        return self.trees[s]  # the observed surfaces are the true ones
-
 
 def _scene():
     """Two drawers: A (bottom) opens over steps 0-8, B (above) over steps 8-16; proposals: both
