@@ -61,6 +61,9 @@ class _Oracle(Tracker):
         on, seen_through = self.verdicts(points, s)
         return float(np.mean(on)), float(np.mean(seen_through))
 
+    def full_tree(self, s):
+        return self.trees[s]  # the observed surfaces are the true ones
+
 
 def _scene():
     """Two drawers: A (bottom) opens over steps 0-8, B (above) over steps 8-16; proposals: both
@@ -126,6 +129,21 @@ def test_absorb_fills_the_steps_only_the_fragment_reached_where_the_images_accep
     assert np.isnan(out.Ts_delta[1]).all()
     np.testing.assert_allclose(out.Ts_delta[[0, 2]], front_a.Ts_delta[[0, 2]], atol=1e-12)
     np.testing.assert_array_equal(out.Ts_delta[3:], front_a.Ts_delta[3:])
+
+
+def test_absorb_replaces_a_failed_pose_with_the_fragments_and_keeps_the_others():
+    """Drawer A's front tracked 5 cm too far out at step 6 (pulled along by a neighbour): there its
+    merged points with the truly tracked side wall fit the images far worse than at its other
+    steps, and the wall's pose fits them: the track takes the wall's pose at step 6 and keeps its
+    own elsewhere.  A wall whose track lags keeps the front's true track whole (no step of it
+    failed)."""
+    oracle, (front_a, _, wall_a), wall_true, ya = _scene()
+    off = front_a.Ts_delta.copy()
+    off[6, 1, 3] -= 0.05
+    front = Proposal("front_a", 4, front_a.points, off)
+    wall = Proposal("wall", 4, wall_true - [0.0, ya[4], 0.0], _motion(ya, 4))
+    np.testing.assert_allclose(absorb(oracle, front, wall, 4).Ts_delta, front_a.Ts_delta, atol=1e-12)
+    np.testing.assert_array_equal(absorb(oracle, front_a, wall_a, 4).Ts_delta, front_a.Ts_delta)
 
 
 def test_a_part_track_that_fails_at_one_step_still_explains_its_wall_and_loses_that_step():
