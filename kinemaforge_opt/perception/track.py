@@ -207,6 +207,12 @@ def acceptable(consistent: float, violated: float) -> bool:
     return judged >= MIN_VISIBLE_SHARE and consistent >= MIN_CONSISTENT_SHARE * judged and violated <= MAX_VIOLATED_SHARE
 
 
+def fit_tie(best: float, n: int) -> float:
+    """The margin within which a fit (:meth:`Tracker.fit`) of ``n`` points ties with the ``best``
+    one: FIT_TIE_SIGMAS standard deviations of a share of ``n`` points at that value."""
+    return FIT_TIE_SIGMAS * float(np.sqrt(max(best * (1.0 - best), 0.0) / n))
+
+
 def displacement(A: np.ndarray, B: np.ndarray, points: np.ndarray) -> float:
     """RMS distance [m] between (N, 3) ``points`` moved by the (4, 4) motions A and B."""
     d = points @ (A[:3, :3] - B[:3, :3]).T + (A[:3, 3] - B[:3, 3])
@@ -482,8 +488,7 @@ class Tracker:
         # of the fits within FIT_TIE_SIGMAS of the best, the first in the guesses' order
         fits = np.array([self.fit(f[1], s, f[2]) for f in found])
         best = float(fits.max())
-        tie = FIT_TIE_SIGMAS * np.sqrt(max(best * (1.0 - best), 0.0) / len(points))
-        return next(f[0] for f, x in zip(found, fits) if x >= best - tie)
+        return next(f[0] for f, x in zip(found, fits) if x >= best - fit_tie(best, len(points)))
 
     def redetect(self, points: np.ndarray, s: int, prediction: np.ndarray) -> np.ndarray | None:
         """Principal-axes alignments of (N, 3) reference points onto the moving clusters at step
@@ -866,12 +871,8 @@ def absorb(tracker: Tracker, p: Proposal, frag: Proposal, anchor: int, failed: l
     Ts[[s for s in failed if s not in (p.ref, anchor)]] = np.nan
     points = _points_with(p, frag, anchor)
     sample = tracking_subset(points)
-
-    def fragment_pose(s: int) -> np.ndarray:
-        return frag.Ts_delta[s] @ np.linalg.inv(frag.Ts_delta[anchor]) @ p.Ts_delta[anchor]
-
     for s in gap:
-        T = fragment_pose(s)
+        T = _continued(frag, p, anchor, s)
         if acceptable(*tracker.verify(transform_points(T, sample), int(s))):
             Ts[s] = T
     both = [int(s) for s in np.flatnonzero(np.isfinite(Ts[:, 0, 0]) & np.isfinite(frag.Ts_delta[:, 0, 0]))
@@ -881,9 +882,9 @@ def absorb(tracker: Tracker, p: Proposal, frag: Proposal, anchor: int, failed: l
     for s in both:
         if own[s] >= FAILED_FIT_SHARE * typical:
             continue
-        T = fragment_pose(s)
+        T = _continued(frag, p, anchor, s)
         other = tracker.fit(transform_points(T, sample), s)
-        if other > own[s] + FIT_TIE_SIGMAS * np.sqrt(max(other * (1.0 - other), 0.0) / len(sample)):
+        if other > own[s] + fit_tie(other, len(sample)):
             Ts[s] = T
     return Proposal(p.name, p.ref, points, Ts)
 
@@ -1059,8 +1060,15 @@ def join(p: Proposal, new: Proposal, anchor: int) -> Proposal:
     ``p``'s pose at the anchor."""
     Ts = p.Ts_delta.copy()
     gap = ~np.isfinite(Ts[:, 0, 0]) & np.isfinite(new.Ts_delta[:, 0, 0])
-    Ts[gap] = new.Ts_delta[gap] @ np.linalg.inv(new.Ts_delta[anchor]) @ p.Ts_delta[anchor]
+    Ts[gap] = _continued(new, p, anchor, gap)
     return Proposal(p.name, p.ref, _points_with(p, new, anchor), Ts)
+
+
+def _continued(other: Proposal, p: Proposal, anchor: int, steps) -> np.ndarray:
+    """``other``'s motion at ``steps`` (a step index or an array of them: (4, 4) or (K, 4, 4))
+    continued from ``p``'s pose at the ``anchor`` step both observe, as a motion from ``p``'s
+    reference."""
+    return other.Ts_delta[steps] @ np.linalg.inv(other.Ts_delta[anchor]) @ p.Ts_delta[anchor]
 
 
 def _points_with(p: Proposal, other: Proposal, anchor: int) -> np.ndarray:
