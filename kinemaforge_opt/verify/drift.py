@@ -102,9 +102,10 @@ def drift(
     return DriftReport(h, drift_m, max_drift, rms, h > t_rec[-1], sim, q_ref)
 
 
-def horizon_key(h: float) -> str:
-    """A horizon [s] as the key of the per-horizon dicts of the verification documents ("1", "50")."""
-    return f"{h:g}"
+def per_horizon(horizons_s, values, cast=float) -> dict:
+    """{horizon key ("1", "50"): cast(value)}, the verification documents' form of one value per
+    horizon (``values`` in the order of ``horizons_s`` [s])."""
+    return {f"{h:g}": cast(v) for h, v in zip(np.asarray(horizons_s, dtype=float).reshape(-1), values)}
 
 
 MASS_SHARE = 0.01
@@ -147,8 +148,7 @@ def drift_range(
 
 def range_record(horizons_s, spread: np.ndarray) -> dict[str, list[float]]:
     """:func:`drift_range`'s (H, 2) result as the documents hold it: {horizon key: [least, largest]}."""
-    horizons = np.asarray(horizons_s, dtype=float).reshape(-1)
-    return {horizon_key(h): [float(lo), float(hi)] for h, (lo, hi) in zip(horizons, spread)}
+    return per_horizon(horizons_s, spread, lambda pair: [float(pair[0]), float(pair[1])])
 
 
 INITIAL_WINDOW_S = 0.25

@@ -50,8 +50,8 @@ from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks, read_tracks, write_tracks
 from ..model import ArticulatedModel, read_urdf
 from ..stops import stop_impacts
-from .drift import (DEFAULT_HORIZONS_S, MASS_SHARE, DriftReport, drift, drift_range, fit_initial_velocity, horizon_key,
-                    range_record)
+from .drift import (DEFAULT_HORIZONS_S, MASS_SHARE, DriftReport, drift, drift_range, fit_initial_velocity,
+                    per_horizon, range_record)
 from .energy import energy_residual, free_segments
 from .forcing import JointRecording, joint_recording
 from .plot import plot_trajectories
@@ -62,7 +62,6 @@ DRIFT_DEFINITION = (
     "forcing; past the recording's end "
     "the measured pose is its last one, held, and the last applied force is held"
 )
-
 
 
 def load_reconstruction(out: str | os.PathLike) -> tuple[ArticulatedModel, dict]:
@@ -187,14 +186,14 @@ def replay_check(model: ArticulatedModel, jr: JointRecording, horizons_s=DEFAULT
     residual = energy_residual(model, fine, sample_t=rec.t)
     books = sum(fine.t[b] - fine.t[a] for a, b in free_segments(model, fine.q, fine.v, t=fine.t, sample_t=rec.t))
     out = {
-        "drift_m": {horizon_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
+        "drift_m": per_horizon(report.horizons_s, report.drift_m),
         # None: the motion never leaves the model's stops, so no span has energy books to check
         "energy_residual": None if np.isnan(residual) else float(residual),
         "energy_books_share": float(books / max(fine.t[-1] - fine.t[0], 1e-12)),
         "drift_definition": DRIFT_DEFINITION,
-        "beyond_recording": {horizon_key(h): bool(b) for h, b in zip(report.horizons_s, report.beyond_recording)},
-        "max_drift_m": {horizon_key(h): float(d) for h, d in zip(report.horizons_s, report.max_drift_m)},
-        "joint_rms": {horizon_key(h): float(d) for h, d in zip(report.horizons_s, report.joint_rms)},
+        "beyond_recording": per_horizon(report.horizons_s, report.beyond_recording, bool),
+        "max_drift_m": per_horizon(report.horizons_s, report.max_drift_m),
+        "joint_rms": per_horizon(report.horizons_s, report.joint_rms),
         "v0": v0.tolist(),
     }
     if with_range:

@@ -19,14 +19,13 @@ import numpy as np
 
 from ..io.recording import Recording
 from ..model import ArticulatedModel
-from .drift import DEFAULT_HORIZONS_S, drift, drift_range, horizon_key, range_record
+from .drift import DEFAULT_HORIZONS_S, drift, drift_range, per_horizon, range_record
 from .energy import energy_residual, model_ordered
 from .plot import plot_trajectories
 from .simulate import simulate
 
 FREE_V0 = {"revolute": 1.0, "continuous": 1.0, "helical": 1.0, "prismatic": 0.1}
 """Initial velocity of the conservative check per joint type [rad/s or m/s]."""
-
 
 
 def energy_text(residual: float | None, fmt: str = ".3g") -> str:
@@ -69,10 +68,10 @@ def verify_recording(
         "mode": "replay",
         "plant": "discrete_1ms" if discrete else "continuous",
         "recording_duration_s": float(rec.t[-1] - rec.t[0]),
-        "drift_m": {horizon_key(h): float(d) for h, d in zip(report.horizons_s, report.drift_m)},
-        "max_drift_m": {horizon_key(h): float(d) for h, d in zip(report.horizons_s, report.max_drift_m)},
-        "joint_rms": {horizon_key(h): float(d) for h, d in zip(report.horizons_s, report.joint_rms)},
-        "beyond_recording": {horizon_key(h): bool(b) for h, b in zip(report.horizons_s, report.beyond_recording)},
+        "drift_m": per_horizon(report.horizons_s, report.drift_m),
+        "max_drift_m": per_horizon(report.horizons_s, report.max_drift_m),
+        "joint_rms": per_horizon(report.horizons_s, report.joint_rms),
+        "beyond_recording": per_horizon(report.horizons_s, report.beyond_recording, bool),
         "energy_residual": None if np.isnan(residual) else float(residual),
         "plot": Path(plot_path).name,
         **extra,
