@@ -309,7 +309,13 @@ class ScrewResult:
     model's) value and the rest re-fitted (stage ``full_refit``; notes say so);
     a ratio the data do not determine stays near its prior (1, the mesh's).  notes: why a term was
     off (or cut short).  identifiability: per fitted dynamic parameter whether the data determine
-    it (:func:`dynamic_identifiability`); empty when none was fitted."""
+    it (:func:`dynamic_identifiability`); empty when none was fitted.  measured_q: (T, n) the joint
+    values the images alone give at the observed steps under the final joints (stages
+    ``measure_<r>``: the visual term on the frame grid with every axis, origin and pitch held,
+    pairs refreshed until they settle), free of the dynamics and energy terms that shaped ``q``:
+    the motion the verifier checks the model against; None without a visual term or when no
+    measuring solve converged.  measure_stages: those solves' records (as ``stages``; not part
+    of the fit, nor of ``success``)."""
 
     model: ArticulatedModel
     q: np.ndarray
@@ -323,6 +329,8 @@ class ScrewResult:
     notes: tuple[str, ...]
     identifiability: dict = field(default_factory=dict)
     fitted: tuple[str, ...] = ()
+    measured_q: np.ndarray | None = None
+    measure_stages: tuple[dict, ...] = ()
 
 
 # --- helpers ---------------------------------------------------------------------------------
@@ -705,14 +713,15 @@ def unseen_hold(data: ScrewData, frame_cols: np.ndarray,
 def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewState,
                         corr: dict[str, list[Correspondences]] | None, dense: bool,
                         held: frozenset[str] = frozenset(), aligned: dict[str, np.ndarray] | None = None,
-                        normalisation: Normalisation | None = None) -> ScrewProblem:
+                        normalisation: Normalisation | None = None, kinematics_held: bool = False) -> ScrewProblem:
     """Build the NLP around ``state`` with fixed correspondences ``corr`` (see module doc).
     ``dense``: states (q, v) on the collocation grid with the dynamics/energy terms as the options
     say; else q on the frame grid and only ``vis``.  ``held``: damping / Coulomb variables
     ("damping:<joint>") held at the state's value instead of fitted.  ``aligned``: joint name ->
     (k, 3) rows C of the linear constraint ``aligned:<joint>`` C · axis = 0 (:mod:`.gravity_aligned`).
     ``normalisation``: the scales of the terms (a continuation's: those of the solve it resumes),
-    else taken from ``state``."""
+    else taken from ``state``.  ``kinematics_held``: every axis, origin and pitch held at the
+    state's value (bounds fixed, their constraints dropped): only the joint states are fitted."""
     model = data.model
     n = model.nq
     joints = model.movable_joints
@@ -759,20 +768,25 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
     theta_sx = ca.SX.sym("theta", dyn.theta0.size)
     theta_parts = []
     axis_of, pitch_of = [], []
+    def bounds(value, lower=-np.inf, upper=np.inf):  # a held parameter's bounds are its value
+        return (value, value) if kinematics_held else (lower, upper)
+
     for k, j in enumerate(joints):
-        a_var = prob.variable(f"axis:{j.name}", 3, lower=-1.5, upper=1.5, init=state.axes[k])
-        prob.add_constraint(f"unit_axis:{j.name}", ca.sumsqr(a_var) - 1.0)
-        if aligned and j.name in aligned:
+        a_var = prob.variable(f"axis:{j.name}", 3, *bounds(state.axes[k], -1.5, 1.5), init=state.axes[k])
+        if not kinematics_held:
+            prob.add_constraint(f"unit_axis:{j.name}", ca.sumsqr(a_var) - 1.0)
+        if aligned and j.name in aligned and not kinematics_held:
             prob.add_constraint(f"aligned:{j.name}", ca.mtimes(ca.DM(aligned[j.name]), a_var))
         theta_parts.append(a_var)
         axis_of.append(theta_sx[dyn.parameter(f"{j.name}.axis").slice])
         if j.type in ("revolute", "continuous", "helical"):
-            o_var = prob.variable(f"origin:{j.name}", 3, init=state.origins[k])
-            a_parent = j.T_parent_joint[:3, :3] @ state.axes[k]
-            prob.add_constraint(f"gauge:{j.name}", ca.dot(ca.DM(a_parent), o_var - ca.DM(state.origins[k])))
+            o_var = prob.variable(f"origin:{j.name}", 3, *bounds(state.origins[k]), init=state.origins[k])
+            if not kinematics_held:
+                a_parent = j.T_parent_joint[:3, :3] @ state.axes[k]
+                prob.add_constraint(f"gauge:{j.name}", ca.dot(ca.DM(a_parent), o_var - ca.DM(state.origins[k])))
             theta_parts.append(o_var)
         if j.type == "helical":
-            p_var = prob.variable(f"pitch:{j.name}", 1, init=state.pitches[k])
+            p_var = prob.variable(f"pitch:{j.name}", 1, *bounds(state.pitches[k]), init=state.pitches[k])
             theta_parts.append(p_var)
             pitch_of.append(theta_sx[dyn.parameter(f"{j.name}.pitch").slice])
         else:
@@ -972,7 +986,8 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             np.diff(t_grid), vis_blocks, 1.0 / norm, options.energy if use_energy else "off",
             edges if use_energy else [], e_scale if use_energy else 1.0,
             options.energy_weight / options.energy_sigma**2,
-            [(f"axis:{j.name}", f"unit_axis:{j.name}") for j in joints], options.hessian == "gauss_newton",
+            [] if kinematics_held else [(f"axis:{j.name}", f"unit_axis:{j.name}") for j in joints],
+            options.hessian == "gauss_newton",
             dyn_mask=dyn_mask, energy_mask=e_mask if use_energy else None, prior=prior_fn,
             hold=None if hold is None else (hold[0], hold[2])))
     scales = Normalisation(v_s, a_s, dyn_mask if use_dyn else None, e_scale if use_energy else None)
@@ -1232,18 +1247,20 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     opts = dataclasses.replace(options, dyn=want_dense)
 
     def run(name, corr, dense, held=frozenset(), converged_only=False, start=None, aligned=None, accept=None,
-            stage_options=None, warm=None, commit=True, ipopt=None, resumes=None):
+            stage_options=None, warm=None, commit=True, ipopt=None, resumes=None, kinematics_held=False, log=None):
         """Solve a stage from ``start`` (default: the current state) with ``stage_options``
         (default: the current ones); ``accept``: a test of a converged result that must also
         pass; ``warm``: the stopped result whose last iterate ``start`` is (IPOPT warm start), with
         ``resumes`` its problem (whose :class:`Normalisation` the continuation keeps);
         ``commit``: an accepted result becomes the current state; ``ipopt``: IPOPT options on top
-        of :func:`_solver_options`.  Returns (problem, result, the accepted solution or else the
+        of :func:`_solver_options`; ``kinematics_held``: only the joint states are fitted
+        (:func:`build_screw_problem`); ``log``: the list the stage's record goes to (default: the
+        fit's ``stages``).  Returns (problem, result, the accepted solution or else the
         unaccepted last iterate or None)."""
         nonlocal state
         t0 = time.perf_counter()
         sp = build_screw_problem(data, stage_options or opts, start or state, corr, dense, held, aligned,
-                                 None if resumes is None else resumes.normalisation)
+                                 None if resumes is None else resumes.normalisation, kinematics_held)
         res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, warm=warm,
                                options={**_solver_options(options, sp.use_dyn, sp.hess_lag), **(ipopt or {})})
         accepted, iterate = False, None
@@ -1255,7 +1272,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             iterate = candidate
             if accepted and commit:
                 state = candidate
-        stages.append({"stage": name, "iterations": res.iterations, "success": res.success, "status": res.status,
+        (stages if log is None else log).append({"stage": name, "iterations": res.iterations, "success": res.success, "status": res.status,
                        "accepted": accepted,
                        "time_s": time.perf_counter() - t0, "solve_s": res.solve_time_s,
                        "eval_s": {k: round(float(v), 3) for k, v in res.stats.items() if k.startswith("t_wall_nlp")},
@@ -1452,8 +1469,24 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                 for choice in choices[1:] if len(aligned) == 1 else choices:
                     if try_aligned({name: choice}):
                         break
-    model = state_model(data, state)
     cols = np.searchsorted(state.t, data.times)
+    measured_q, measure_stages = None, []
+    if corr:
+        # the motion the images show under the final joints: the visual term alone, the joints held
+        measured = dataclasses.replace(state, t=data.times.copy(), q=state.q[cols], v=None)
+        for r in range(options.rounds):
+            pairs = correspondences(data, measured, size, plane_gate=plane_gate)
+            _, _, solved = run(f"measure_{r + 1}", pairs, False, converged_only=True, start=measured, commit=False,
+                               stage_options=dataclasses.replace(opts, fit_thickness=False), kinematics_held=True,
+                               log=measure_stages)
+            if not measure_stages[-1]["accepted"]:
+                break
+            moved = not _converged((measured.axes, measured.origins, measured.q), solved)
+            measured_q = solved.q
+            measured = solved
+            if not moved:
+                break
+    model = state_model(data, state)
     terms = {"vis": None, "dyn": None, "energy": None, "inertia_prior": None}
     for name, value in res.costs.items():
         key = "energy" if name == "energy_residual" else name
@@ -1471,7 +1504,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         notes.append(f"dyn, energy: stop impacts; the terms leave out {where}")
     return ScrewResult(model, state.q[cols], state, terms, int(sum(s["iterations"] for s in stages)),
                        _all_converged(stages), tuple(stages), time.perf_counter() - start,
-                       identified, tuple(notes), identifiability, fitted)
+                       identified, tuple(notes), identifiability, fitted, measured_q, tuple(measure_stages))
 
 
 def _all_converged(stages: list[dict]) -> bool:

@@ -25,6 +25,7 @@ from ..errors import DataError
 from ..graph import infer_tree
 from ..graph.tree import GraphResult, KinematicTree
 from ..io.atomic import atomic_path, write_text_atomic
+from ..io.recording import Recording
 from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks, ZeroConfiguration, zero_configuration
 from ..model import ArticulatedModel, Geometry, Inertial, Joint, JointLimits, Link, write_urdf
@@ -212,7 +213,10 @@ class Reconstruction:
     """Result of :func:`reconstruct_sequence`.  perception, graph: the stage results.
     model: the ArticulatedModel written as URDF.  document: reconstruction.json's content.
     clouds_world: part name -> (N, 3) fused points at the zero configuration [m].
-    labels: per time step the part name of each fused point."""
+    labels: per time step the part name of each fused point.  measured_q: the joint values the
+    screw NLP measured with the images under the final joints at the perception's time steps
+    (:attr:`~kinemaforge_opt.nlp.reconstruction.ScrewResult.measured_q`; q only), or None
+    without the NLP."""
 
     perception: Perception
     graph: GraphResult
@@ -220,6 +224,7 @@ class Reconstruction:
     document: dict
     clouds_world: dict[str, np.ndarray]
     labels: list[np.ndarray]
+    measured_q: Recording | None = None
 
 
 def _part_representatives(tracks: PoseTracks, tree: KinematicTree) -> dict[str, int]:
@@ -549,13 +554,13 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
     """Closed-form model, then (unless ``options`` is None) the screw-axis NLP and the model rebuilt
     on its joints, with each moving part's solid over the final joints' motion filled into the
     point labels (:mod:`solids`; the NLP sees the perception stage's labels).  Returns
-    build_model's first five, the ``nlp`` document (None without NLP) and build_model's mass
-    report."""
+    build_model's first five, the ``nlp`` document (None without NLP), build_model's mass
+    report and the NLP's measured joint values (:class:`Reconstruction`'s ``measured_q``)."""
     lines = closed_form_lines(per, graph)
     built = build_model(per, graph, density, name, lines, gravity=seq.gravity)
     model, records, clouds_world, meshes, labels, masses, mass_report = built
     if not model.movable_joints:
-        return model, records, clouds_world, meshes, labels, None, mass_report
+        return model, records, clouds_world, meshes, labels, None, mass_report, None
     type_notes = []
     if options is None:
         final_lines, moved, q = lines, model, np.column_stack([lines[j.name].q for j in model.movable_joints])
@@ -577,20 +582,29 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
         per, graph, density, name, final_lines, labels, masses, seq.gravity,
         limits={j.name: j.limits for j in moved.movable_joints} if options is not None else None)
     if options is None:
-        return model, records, clouds_world, meshes, labels, None, mass_report
+        return model, records, clouds_world, meshes, labels, None, mass_report, None
     model = _apply_identified(model, records, result, data.model)
+    measured = None if result.measured_q is None else Recording(
+        data.times, tuple(j.name for j in data.model.movable_joints), result.measured_q)
     doc = {
         "enabled": True, "terms": result.terms, "iterations": result.iterations, "success": result.success,
         "time_s": prepare_s + result.time_s, "prepare_s": prepare_s, "solve_s": result.time_s, "fitted": list(result.fitted), "identified": list(result.identified), "notes": [*type_notes, *result.notes],
-        "stages": [{k: v for k, v in st.items() if k in ("stage", "iterations", "success", "accepted", "status", "time_s", "solve_s", "costs")}
-                   for st in result.stages],
+        "stages": [_stage_record(st) for st in result.stages],
+        # the joint values the verifier checks the model against (ScrewResult.measured_q)
+        "measure_stages": [_stage_record(st) for st in result.measure_stages],
         "options": dataclasses.asdict(options),
         "closed_form": [_line_record(n, lines[n]) for n in lines],
         "mass_ratio": result.state.mass_ratio,
         "inertia_ratio": result.state.inertia_ratio,
         "identifiability": result.identifiability,
     }
-    return model, records, clouds_world, meshes, labels, doc, mass_report
+    return model, records, clouds_world, meshes, labels, doc, mass_report, measured
+
+
+def _stage_record(stage: dict) -> dict:
+    """The document's record of an NLP stage."""
+    return {k: v for k, v in stage.items()
+            if k in ("stage", "iterations", "success", "accepted", "status", "time_s", "solve_s", "costs")}
 
 
 def reconstruct_sequence(seq_path: str | Path, out: str | Path | None = None, method: str = "graph",
@@ -623,7 +637,8 @@ def reconstruct_sequence(seq_path: str | Path, out: str | Path | None = None, me
         bar.update(1)
         bar.set_description("graph")
         t0 = time.perf_counter()
-        model, records, clouds_world, meshes, labels, nlp_doc, mass_report = refine_model(per, graph, seq, density, options)
+        model, records, clouds_world, meshes, labels, nlp_doc, mass_report, measured = refine_model(
+            per, graph, seq, density, options)
         elapsed = time.perf_counter() - t0
         per.timing_s["nlp"] = nlp_doc["time_s"] if nlp_doc else 0.0
         per.timing_s["model"] = elapsed - per.timing_s["nlp"]
@@ -653,4 +668,4 @@ def reconstruct_sequence(seq_path: str | Path, out: str | Path | None = None, me
                 np.savez(f, **clouds_world)
         doc["timing_s"]["total"] = time.perf_counter() - start
         write_text_atomic(out / "reconstruction.json", json.dumps(doc, indent=2))
-    return Reconstruction(per, graph, model, doc, clouds_world, labels)
+    return Reconstruction(per, graph, model, doc, clouds_world, labels, measured)

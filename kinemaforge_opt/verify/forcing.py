@@ -18,9 +18,11 @@ the root) and T_world_P⁰, T_world_C⁰ their poses at q = 0,
     revolute / helical:  q(t) = twist of R_D(t) about a_P, on the branch its position gives   [rad]
     prismatic:           q(t) = (p_M(t) − p_M⁰) · a_P                                          [m]
 
-with a_world the joint axis in the world at q = 0 (forward kinematics of the model).  Steps at
-which a joint's two tracks are not both observed are filled by linear interpolation in time and
-reported.  The values span the steps from the first at which every joint is measured to the last
+with a_world the joint axis in the world at q = 0 (forward kinematics of the model).  Where the
+joint values were measured otherwise (a reconstruction's visual fit under its final joints,
+``measured`` of :func:`joint_values`), those values replace the tracks' at the steps the tracks
+observe.  Steps at which a joint's two tracks are not both observed are filled by linear
+interpolation in time and reported.  The values span the steps from the first at which every joint is measured to the last
 (where no step measures them all, those that measure the most): before and after, a value could only be held, and a held value is no measurement (a door whose
 track starts late, pushed open while it was near shut, held at its first tracked angle under the
 push's force, replayed 6.6 cm off within a second).
@@ -145,8 +147,14 @@ def _representative(tracks: PoseTracks, members: Sequence[str], link: str) -> in
     return next(tracks.names.index(m) for m in known if obs[tracks.names.index(m)] == best)
 
 
-def joint_values(model: ArticulatedModel, tracks: PoseTracks, link_tracks: Mapping[str, Sequence[str]]) -> JointValues:
+def joint_values(model: ArticulatedModel, tracks: PoseTracks, link_tracks: Mapping[str, Sequence[str]],
+                 measured: Recording | None = None) -> JointValues:
     """q per track time step for every movable joint of ``model`` (module docs).
+
+    measured: joint values measured otherwise at the tracks' times (a reconstruction's visual fit
+    under its final joints, ``measured_q.csv``), in the model's own coordinates; each joint it
+    holds takes them at the steps its tracks observe instead of the tracks' values (the steps,
+    the span and the zero step stay the tracks').
 
     link_tracks: link name -> the names of the tracks that move with it (the root's may be
     omitted).  The zero configuration is :func:`~kinemaforge_opt.io.tracks.zero_configuration`'s
@@ -201,6 +209,8 @@ def joint_values(model: ArticulatedModel, tracks: PoseTracks, link_tracks: Mappi
                 raise DataError(f"joint {j.name!r}: the track of {j.child!r} is turned over about an axis across "
                                 f"the joint at all but {idx.size} step(s), and its position lies on the joint line")
             qi -= 2 * np.pi * np.round(np.interp(zero.steps[j.child], idx, qi) / (2 * np.pi))
+        if measured is not None and j.name in measured.joint_names:
+            qi = _measured_at(measured, j.name, tracks.times[idx])
         q[:, i] = np.interp(np.arange(T), idx, qi)
         observed[idx, i] = True
     names = {link: (None if k is None else tracks.names[k]) for link, k in reps.items()}
@@ -215,6 +225,17 @@ def joint_values(model: ArticulatedModel, tracks: PoseTracks, link_tracks: Mappi
     span = slice(first, last + 1)
     zero_t = {j.name: float(tracks.times[zero.steps[j.child]]) for j in model.movable_joints}
     return JointValues(tracks.times[span].copy(), model.joint_names, q[span], observed[span], s0 - first, names, zero_t)
+
+
+def _measured_at(measured: Recording, joint: str, t: np.ndarray) -> np.ndarray:
+    """(N,) ``joint``'s measured values at the times ``t`` (N,) [s], each one of ``measured``'s
+    own times; raises :class:`DataError` naming the first time it lacks."""
+    rows = np.searchsorted(measured.t, t).clip(0, measured.t.size - 1)
+    missing = ~np.isclose(measured.t[rows], t, rtol=0.0, atol=1e-9)
+    if missing.any():
+        raise DataError(f"the measured joint values have no sample at t = {t[missing][0]:.6g} s, a time "
+                        f"step of the tracks (joint {joint!r})")
+    return measured.q[rows, measured.joint_names.index(joint)]
 
 
 POSITION_FLOOR_M = 1e-6
@@ -347,10 +368,12 @@ def joint_recording(
     link_tracks: Mapping[str, Sequence[str]],
     wrenches: Wrenches | None = None,
     clouds_world: Mapping[str, np.ndarray] | None = None,
+    measured: Recording | None = None,
 ) -> JointRecording:
-    """The joint-space recording of a reconstruction (module docs): q from ``tracks`` and, when
-    ``wrenches`` are given, τ from them; times span the steps where every joint is measured."""
-    values = joint_values(model, tracks, link_tracks)
+    """The joint-space recording of a reconstruction (module docs): q from ``tracks`` (or, at the
+    steps they observe, from ``measured``: :func:`joint_values`) and, when ``wrenches`` are given,
+    τ from them; times span the steps where every joint is measured."""
+    values = joint_values(model, tracks, link_tracks, measured)
     if wrenches is None:
         rec = Recording(values.t, values.joint_names, values.q)
         return JointRecording(rec, None, values, None)

@@ -5,7 +5,14 @@ motion the reconstruction measured:
 
 1. the joint-space recording of the reconstruction (:mod:`.forcing`): q at every time step of
    the part tracks, τ from ``SEQ/wrenches.csv`` mapped to joint forces through the model (no
-   wrenches: no τ, a free response from the first measured state);
+   wrenches: no τ, a free response from the first measured state).  Where the reconstruction
+   measured its joint values with the images under its final joints (``OUT/measured_q.csv``, the
+   screw NLP's ``measure`` stages: the visual term alone, every axis and origin held), q is that
+   measurement at the steps the tracks observe: each track pose is a six-degree-of-freedom ICP
+   fit of its own, and a pose off by a few millirad at one step — a door's track at the shut
+   step, where the door lies flush with its carcass — puts that offset into every value since
+   the zero step (protocol_cabinet_0@s1: 0.011 rad, its energy residual 0.027 where the true
+   model reads 0.002; measured: 0.005);
 2. the replay (:func:`.drift.drift`): Drake from the first measured q, under the full-rate τ, on
    the discrete 1 ms plant (joint limits enforced); the initial velocity is the one whose replay
    best matches the first 0.25 s (:func:`.drift.fit_initial_velocity`: finite differences of q
@@ -27,7 +34,7 @@ motion the reconstruction measured:
    residual from 0.209 to 0.029 (a laptop lid slammed shut: 0.96 to 0.09).
 
 Outputs in OUT: ``recording.csv`` (the joint-space recording, so ``diagnose`` and ``view`` can use
-it), ``replay.csv`` (the Drake replay, same time base, up to the longest horizon), ``tracks.csv``
+it), ``measured_q.csv`` (when the measurement comes from memory), ``replay.csv`` (the Drake replay, same time base, up to the longest horizon), ``tracks.csv``
 (when the tracks come from memory), ``trajectories.png``, and
 ``reconstruction.json["verification"]`` = {"drift_m": {"1": …, "50": …}, "energy_residual": …,
 …} written atomically with the rest of the document.
@@ -45,7 +52,7 @@ from scipy.interpolate import CubicSpline
 
 from ..errors import InputFileError
 from ..io.atomic import write_text_atomic
-from ..io.recording import Recording, write_recording
+from ..io.recording import Recording, read_recording, write_recording
 from ..io.sequence import load_sequence
 from ..io.tracks import PoseTracks, read_tracks, write_tracks
 from ..model import ArticulatedModel, read_urdf
@@ -55,6 +62,10 @@ from .drift import (DEFAULT_HORIZONS_S, MASS_SHARE, DriftReport, drift, drift_ra
 from .energy import energy_residual, free_segments
 from .forcing import JointRecording, joint_recording
 from .plot import plot_trajectories
+
+MEASURED_Q = "measured_q.csv"
+"""The reconstruction's joint values measured by the visual fit under its final joints (a
+joint-space recording with q only, at the perception's time steps, in the model's coordinates)."""
 
 DRIFT_DEFINITION = (
     "max over moving links' origins and centres of mass of |p_replay(t0+h) - p_measured(t0+h)| [m]; "
@@ -106,10 +117,12 @@ def reconstruction_recording(
     doc: dict | None = None,
     tracks: PoseTracks | None = None,
     clouds: dict[str, np.ndarray] | None = None,
+    measured: Recording | None = None,
 ) -> JointRecording:
     """The joint-space recording of the reconstruction in ``out`` (:mod:`.forcing`), with τ from
     ``sequence``/wrenches.csv.  Anything not given is read from ``out`` (model.urdf,
-    reconstruction.json, tracks.csv, clouds.npz)."""
+    reconstruction.json, tracks.csv, clouds.npz, and measured_q.csv where the reconstruction
+    wrote one: module docs, step 1)."""
     out = Path(out)
     if model is None or doc is None:
         model, doc = load_reconstruction(out)
@@ -121,8 +134,11 @@ def reconstruction_recording(
         tracks = read_tracks(path)
     if clouds is None:
         clouds = load_clouds(out)
+    if measured is None and (out / MEASURED_Q).is_file():
+        measured = read_recording(out / MEASURED_Q)
     seq = load_sequence(sequence)
-    return joint_recording(model, tracks, link_tracks(doc, str(out / "reconstruction.json")), seq.wrenches, clouds)
+    return joint_recording(model, tracks, link_tracks(doc, str(out / "reconstruction.json")), seq.wrenches, clouds,
+                           measured)
 
 
 def fine_motion(jr: JointRecording) -> Recording:
@@ -235,11 +251,16 @@ def verify_reconstruction(
     if reconstruction is not None:
         model, doc = reconstruction.model, dict(reconstruction.document)
         tracks, clouds = reconstruction.perception.tracks, reconstruction.clouds_world
+        measured = reconstruction.measured_q
         write_tracks(out / "tracks.csv", tracks)
+        if measured is not None:
+            write_recording(out / MEASURED_Q, measured)
+        else:  # an earlier run's measurement is not this reconstruction's
+            (out / MEASURED_Q).unlink(missing_ok=True)
     else:
         model, doc = load_reconstruction(out)
-        tracks = clouds = None
-    jr = reconstruction_recording(out, sequence, model, doc, tracks, clouds)
+        tracks = clouds = measured = None
+    jr = reconstruction_recording(out, sequence, model, doc, tracks, clouds, measured)
     rec = jr.recording
     write_recording(out / "recording.csv", rec)
     checked, report = replay_check(model, jr, horizons_s, discrete, with_range)
@@ -257,6 +278,8 @@ def verify_reconstruction(
             {"link": link, "t_s": [float(jr.wrenches.t[a]), float(jr.wrenches.t[b])]}
             for a, b, link in jr.wrenches.contacts],
         "interpolated_samples": {n: int((~jr.values.observed[:, i]).sum()) for i, n in enumerate(model.joint_names)},
+        "joint_values": (f"{MEASURED_Q}: the visual fit under the final joints, at the steps the tracks observe"
+                         if (out / MEASURED_Q).is_file() else "tracks.csv"),
         "plant": "discrete_1ms" if discrete else "continuous",
         "files": ["recording.csv", "replay.csv", "trajectories.png"],
         "timing_s": {"replay": report.simulated.wall_time_s, "total": time.perf_counter() - start},

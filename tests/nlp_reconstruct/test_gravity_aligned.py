@@ -148,10 +148,10 @@ def test_an_aligned_fit_stopped_at_max_iter_is_continued_from_its_iterate(monkey
     true, data = _door_data(np.array([0.0, 0.0, 1.0]))
     build = reco.build_screw_problem
 
-    def build_and_stop_cold_aligned_fits(data, options, state, corr, dense, held, aligned, normalisation):
+    def build_and_stop_cold_aligned_fits(data, options, state, corr, dense, held, aligned, normalisation, *held_kin):
         # every aligned solve not warm-started stops after two iterations (the settling rounds
         # too, which are kept as they stop)
-        sp = build(data, options, state, corr, dense, held, aligned, normalisation)
+        sp = build(data, options, state, corr, dense, held, aligned, normalisation, *held_kin)
         if aligned is not None:
             solve = sp.problem.solve
             sp.problem.solve = lambda **kw: solve(**{**kw, "max_iter": 2 if kw.get("warm") is None else kw["max_iter"]})

@@ -57,12 +57,16 @@ def test_nlp_results_reach_the_urdf_and_the_document(tiny_reconstruction):
         if "dynamics" in r:  # identified from the recorded push
             assert j.dynamics.damping == pytest.approx(r["dynamics"]["damping"])
     assert rec.model.nq == model.nq
+    # the joint values measured for the verifier, at the perception's steps, in the model's joints
+    assert rec.measured_q.joint_names == tuple(model.joint_names)
+    np.testing.assert_array_equal(rec.measured_q.t, rec.perception.times)
+    assert nlp["measure_stages"] and nlp["measure_stages"][0]["stage"] == "measure_1"
 
 
 def test_without_nlp_the_closed_form_is_kept(tiny_case, tmp_path):
     with_nlp = reconstruct_sequence(tiny_case.sequence, None, show_progress=False, energy=False)
     without = reconstruct_sequence(tiny_case.sequence, None, show_progress=False, nlp=False)
-    assert without.document["nlp"] == {"enabled": False}
+    assert without.document["nlp"] == {"enabled": False} and without.measured_q is None
     assert with_nlp.document["nlp"]["options"]["energy"] == "off" and with_nlp.document["nlp"]["terms"]["energy"] is None
     # the NLP started from exactly the closed form that the ablation keeps
     closed = {r["name"]: r for r in with_nlp.document["nlp"]["closed_form"]}

@@ -173,3 +173,33 @@ def test_joints_never_measured_together_are_each_zero_where_their_part_was_place
         assert seen.sum() >= 10
         np.testing.assert_allclose(values.q[seen, k], q_true[seen], atol=1e-9)
     assert np.ptp(values.q[values.observed[:, 1], 1]) > 0.05  # the drawer moved while it was seen
+
+
+def test_measured_joint_values_replace_the_tracks_at_the_steps_they_observe(two_joints):
+    """A measurement of the door's joint (as a reconstruction's visual fit gives, in the model's own
+    coordinates: here MuJoCo's q 0.02 rad off the tracks' zero) replaces the door's values where its
+    track is observed; where it is not, the measured values are interpolated, as the tracks' are.
+    The drawer, not in the measurement, keeps its tracks' values."""
+    from kinemaforge_opt.io.recording import Recording
+
+    model, tracks, links, wrenches = _inputs(two_joints)
+    truth = read_recording(two_joints.recording)
+    k = tracks.names.index("door")
+    P, R = tracks.positions.copy(), tracks.Rs_world_track.copy()
+    P[k, 7] = R[k, 7] = np.nan  # the door unseen at step 7
+    hidden = PoseTracks(tracks.times, tracks.names, P, R)
+    door_q = np.interp(tracks.times, truth.t, truth.q[:, 0]) + 0.02
+    measured_door = door_q.copy()
+    measured_door[7] += 0.5  # not a measurement of the door's track: left out
+    measured = Recording(tracks.times, ("door_joint",), measured_door[:, None])
+    values = joint_values(model, hidden, links, measured)
+    seen = np.arange(tracks.times.size) != 7
+    np.testing.assert_allclose(values.q[seen, 0], door_q[seen], atol=1e-9)
+    assert values.q[7, 0] == pytest.approx(np.interp(tracks.times[7], tracks.times[seen], door_q[seen]))
+    assert not values.observed[7, 0] and values.observed[:7, 0].all()
+    plain = joint_values(model, hidden, links)
+    np.testing.assert_array_equal(values.q[:, 1], plain.q[:, 1])
+    # a measurement that lacks a time step of the tracks is a named error
+    short = Recording(tracks.times[:-1], ("door_joint",), door_q[:-1, None])
+    with pytest.raises(DataError, match=r"no sample at t = .* of the tracks \(joint 'door_joint'\)"):
+        joint_values(model, hidden, links, short)

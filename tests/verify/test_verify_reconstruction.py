@@ -117,3 +117,45 @@ def test_diagnose_on_a_reconstruction_finds_the_damper(tmp_path, capsys):
     effects = json.loads((d / "diagnosis.json").read_text())["effects"]
     assert [e["type"] for e in effects] == ["viscous_damping"]
     assert effects[0]["value"] == pytest.approx(0.8, rel=0.15)
+
+
+def test_measured_joint_values_take_the_place_of_a_biased_track(door, tmp_path):
+    """The door's track turned 0.03 rad about its hinge at the zero step (a shut door's pose,
+    flush with its carcass, is what ICP fixes worst) puts that offset into every later value the
+    tracks give: the true model's energy books go out.  The reconstruction's own measurement of
+    the joint (``measured_q.csv``, here MuJoCo's q) replaces the tracks' values, and the books
+    balance again."""
+    import pinocchio as pin
+
+    from kinemaforge_opt.io.recording import Recording, write_recording
+    from kinemaforge_opt.io.tracks import PoseTracks, read_tracks, write_tracks
+    from kinemaforge_opt.model.pinocchio import build_pin_model
+    from kinemaforge_opt.spatial import exp_so3
+
+    model = read_urdf(door.true_urdf)
+    pm = build_pin_model(model)
+    data = pm.createData()
+    pin.forwardKinematics(pm, data, np.zeros(model.nq))
+    hinge = data.oMi[pm.getJointId("door_joint")]
+    a, o = hinge.rotation @ model.joint("door_joint").axis, hinge.translation
+    tracks = read_tracks(door.tracks)
+    k = tracks.names.index("door")
+    R, P = tracks.Rs_world_track.copy(), tracks.positions.copy()
+    turn = exp_so3(a * 0.03)
+    R[k, 0], P[k, 0] = turn @ R[k, 0], turn @ (P[k, 0] - o) + o
+    truth = read_recording(door.recording)
+    residual = {}
+    for name in ("biased", "measured"):
+        out = truth_folder(door, tmp_path / name, door.true_urdf)
+        write_tracks(out / "tracks.csv", PoseTracks(tracks.times, tracks.names, P, R))
+        if name == "measured":
+            q = np.interp(tracks.times, truth.t, truth.q[:, 0])
+            write_recording(out / "measured_q.csv", Recording(tracks.times, ("door_joint",), q[:, None]))
+        v = verify_reconstruction(out, door.sequence)
+        residual[name] = v["energy_residual"]
+        assert v["joint_values"].startswith("measured_q.csv" if name == "measured" else "tracks.csv")
+        rec = read_recording(out / "recording.csv")
+        q_true = np.interp(rec.t, truth.t, truth.q[:, 0])
+        offset = rec.q[1:, 0] - q_true[1:]
+        assert np.abs(offset).max() < 1e-9 if name == "measured" else np.abs(offset + 0.03).max() < 1e-6
+    assert residual["measured"] < 0.005 and residual["biased"] > 5 * residual["measured"]  # 0.0009, 0.011 when written
