@@ -26,7 +26,8 @@ INPUT is one of
                   moving parts -> SE(3) tracks -> tree; also writes OUT/model.urdf,
                   OUT/meshes/<link>.obj (convex hulls, mass from --density) and OUT/clouds.npz,
                   then verifies the model in Drake: the measured joint motion (OUT/recording.csv,
-                  q from the part tracks OUT/tracks.csv, tau from SEQ/wrenches.csv mapped to joint
+                  q as the images show it under the final joints, OUT/measured_q.csv, at the steps
+                  the part tracks OUT/tracks.csv observe, tau from SEQ/wrenches.csv mapped to joint
                   forces) is replayed (OUT/replay.csv, OUT/trajectories.png); drift at 1, 5, 10,
                   20, 50 s and the energy residual go into reconstruction.json["verification"]
   tracks.csv      t,track,x,y,z,qx,qy,qz,qw (full pose) or t,track,x,y,z (position only),

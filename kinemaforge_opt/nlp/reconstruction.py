@@ -57,7 +57,7 @@ from scipy.interpolate import CubicSpline
 from ..errors import DataError, KinemaforgeError, ModelError
 from ..io.sequence import Wrenches
 from ..model import ArticulatedModel, Inertial, JointLimits
-from ..parallel import workers
+from ..parallel import thread_map, workers
 from ..physics.effects import EFFECTS
 from ..spatial import rms_radius
 from ..symbolic import build_dynamics
@@ -91,6 +91,11 @@ VIS_SLACK = 0.5
 # Pairs beyond this many robust standard deviations of the warm-up's residuals are outliers (the
 # 3σ rule; :func:`residual_gate`).
 PLANE_GATE_SIGMAS = 3.0
+# Observed points per part and step the measurement of the joint values uses (ScrewResult.measured_q;
+# the fit uses ScrewOptions.points_per_part).  Over Table 1's 28 joints the RMS error of the measured
+# q against the truth averaged 4.4 (mrad or mm) with 200 points, 3.5 with 1000, 3.2 with 3000 and
+# with every point (up to 15 000); 3000 cost 0.6 s on protocol_cabinet_0, every point 1.4 s.
+MEASURE_POINTS_PER_PART = 3000
 # Points per step that estimate a part's far-side thickness (a median over all steps).
 THICKNESS_SAMPLE = 500
 # A part's far-side slab thickness is fitted in a visual stage when its far-side pairs weigh at
@@ -311,8 +316,8 @@ class ScrewResult:
     off (or cut short).  identifiability: per fitted dynamic parameter whether the data determine
     it (:func:`dynamic_identifiability`); empty when none was fitted.  measured_q: (T, n) the joint
     values the images alone give at the observed steps under the final joints (stages
-    ``measure_<r>``: the visual term on the frame grid over every observed point with every axis,
-    origin and pitch held, pairs refreshed until they settle), free of the dynamics and energy terms that shaped ``q``:
+    ``measure_<r>``: the visual term on the frame grid over up to :data:`MEASURE_POINTS_PER_PART`
+    observed points a step with every axis, origin and pitch held, pairs refreshed until they settle), free of the dynamics and energy terms that shaped ``q``:
     the motion the verifier checks the model against; None without a visual term or when no
     measuring solve converged.  measure_stages: those solves' records (as ``stages``; not part
     of the fit, nor of ``success``)."""
@@ -495,8 +500,9 @@ def correspondences(data: ScrewData, state: ScrewState, size: int, seed: int = 0
         thickness = None
         if data.sightlines is not None and surface.oriented:
             thickness = state.thickness[link] if link in state.thickness else far_side_thickness(surface, blocks, delta)
-        out[link] = [correspond(pts, T, surface, data.gate, size, delta, plane_gate, sight, thickness)
-                     for pts, T, sight in blocks]
+        # the steps on the workers (the KD queries release the GIL); the same pairs as in order
+        out[link] = thread_map(lambda b: correspond(b[0], b[1], surface, data.gate, size, delta, plane_gate, b[2], thickness),
+                               blocks)
     return out
 
 
@@ -1474,11 +1480,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     if corr:
         # the motion the images show under the final joints: the visual term alone, the joints held
         measured = dataclasses.replace(state, t=data.times.copy(), q=state.q[cols], v=None)
-        # every observed point, not the fit's subsample: over Table 1's 28 joints the q RMS error
-        # against the truth averaged 3.2 (mrad or mm) this way, 4.4 with the fit's 200 points a step
-        every = max(_rows(pts) for obs in data.observed.values() for pts in obs)
         for r in range(options.rounds):
-            pairs = correspondences(data, measured, every, plane_gate=plane_gate)
+            pairs = correspondences(data, measured, MEASURE_POINTS_PER_PART, plane_gate=plane_gate)
             _, _, solved = run(f"measure_{r + 1}", pairs, False, converged_only=True, start=measured, commit=False,
                                stage_options=dataclasses.replace(opts, fit_thickness=False), kinematics_held=True,
                                log=measure_stages)
