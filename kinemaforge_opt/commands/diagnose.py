@@ -27,8 +27,9 @@ several recordings of the same system (--also): fitted together, one model for a
   fixes no inertia scale, a push does.  Unlike --other, these recordings shape the fit.
 
 on a reconstruction (first argument = a folder written by `kinemaforge reconstruct SEQ -o R`):
-  the joint-space recording is built from it: q per time step from R/tracks.csv (the part
-  tracks, measured against the joint axes of R/model.urdf) and tau from SEQ/wrenches.csv mapped
+  the joint-space recording is built from it: q per time step as the images show it under the
+  joints of R/model.urdf (R/measured_q.csv, at the steps the part tracks R/tracks.csv observe; from
+  the tracks themselves where the reconstruction wrote no measurement) and tau from SEQ/wrenches.csv mapped
   to joint forces through the model (each contact given to the link that carries its point);
   it is written to OUT/recording.csv, R/meshes is copied to OUT/meshes, then as above, except
   that the joints are searched without position limits (a reconstruction's limits are only the

@@ -201,5 +201,6 @@ def _run_sequence(args) -> int:
         print("  no wrenches.csv: Drake replays the free response from the first state, so wherever something "
               "pushed a part the drift measures that push, not the model (its dynamics are the meshes' "
               "inertia with no damping: without forces nothing fixes them)")
-    print(f"wrote {args.out / 'recording.csv'}, tracks.csv, trajectories.png; verification in reconstruction.json")
+    measured = ", measured_q.csv" if (args.out / "measured_q.csv").is_file() else ""
+    print(f"wrote {args.out / 'recording.csv'}, tracks.csv{measured}, trajectories.png; verification in reconstruction.json")
     return 0
