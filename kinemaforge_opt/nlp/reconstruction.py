@@ -317,10 +317,11 @@ class ScrewResult:
     it (:func:`dynamic_identifiability`); empty when none was fitted.  measured_q: (T, n) the joint
     values the images alone give at the observed steps under the final joints (stages
     ``measure_<r>``: the visual term on the frame grid over up to :data:`MEASURE_POINTS_PER_PART`
-    observed points a step with every axis, origin and pitch held, pairs refreshed until they settle), free of the dynamics and energy terms that shaped ``q``:
-    the motion the verifier checks the model against; None without a visual term or when no
-    measuring solve converged.  measure_stages: those solves' records (as ``stages``; not part
-    of the fit, nor of ``success``)."""
+    observed points a step with every axis, origin and pitch held, pairs refreshed until they
+    settle), free of the dynamics and energy terms that shaped ``q``: the motion the verifier
+    checks the model against; None without a visual term or when no measuring solve converged.
+    measure_stages: those solves' records (as ``stages``; not part of the fit, nor of
+    ``success``)."""
 
     model: ArticulatedModel
     q: np.ndarray
@@ -774,6 +775,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
     theta_sx = ca.SX.sym("theta", dyn.theta0.size)
     theta_parts = []
     axis_of, pitch_of = [], []
+
     def bounds(value, lower=-np.inf, upper=np.inf):  # a held parameter's bounds are its value
         return (value, value) if kinematics_held else (lower, upper)
 
@@ -1278,12 +1280,13 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             iterate = candidate
             if accepted and commit:
                 state = candidate
-        (stages if log is None else log).append({"stage": name, "iterations": res.iterations, "success": res.success, "status": res.status,
-                       "accepted": accepted,
-                       "time_s": time.perf_counter() - t0, "solve_s": res.solve_time_s,
-                       "eval_s": {k: round(float(v), 3) for k, v in res.stats.items() if k.startswith("t_wall_nlp")},
-                       "costs": res.costs, "violations": res.violations, "n_vis": sp.n_vis,
-                       "variables": sp.problem.sizes["variables"]})
+        (stages if log is None else log).append({
+            "stage": name, "iterations": res.iterations, "success": res.success, "status": res.status,
+            "accepted": accepted,
+            "time_s": time.perf_counter() - t0, "solve_s": res.solve_time_s,
+            "eval_s": {k: round(float(v), 3) for k, v in res.stats.items() if k.startswith("t_wall_nlp")},
+            "costs": res.costs, "violations": res.violations, "n_vis": sp.n_vis,
+            "variables": sp.problem.sizes["variables"]})
         return sp, res, iterate
 
     def run_dense(name, corr, held=frozenset(), converged_only=False, ipopt=None):
@@ -1488,8 +1491,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             if not measure_stages[-1]["accepted"]:
                 break
             moved = not _converged((measured.axes, measured.origins, measured.q), solved)
-            measured_q = solved.q
             measured = solved
+            measured_q = measured.q
             if not moved:
                 break
     model = state_model(data, state)

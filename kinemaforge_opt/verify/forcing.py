@@ -22,8 +22,9 @@ with a_world the joint axis in the world at q = 0 (forward kinematics of the mod
 joint values were measured otherwise (a reconstruction's visual fit under its final joints,
 ``measured`` of :func:`joint_values`), those values replace the tracks' at the steps the tracks
 observe.  Steps at which a joint's two tracks are not both observed are filled by linear
-interpolation in time and reported.  The values span the steps from the first at which every joint is measured to the last
-(where no step measures them all, those that measure the most): before and after, a value could only be held, and a held value is no measurement (a door whose
+interpolation in time and reported.  The values span the steps from the first at which every
+joint is measured to the last (where no step measures them all, those that measure the most):
+before and after, a value could only be held, and a held value is no measurement (a door whose
 track starts late, pushed open while it was near shut, held at its first tracked angle under the
 push's force, replayed 6.6 cm off within a second).
 
