@@ -34,10 +34,10 @@ motion the reconstruction measured:
    residual from 0.209 to 0.029 (a laptop lid slammed shut: 0.96 to 0.09).
 
 Outputs in OUT: ``recording.csv`` (the joint-space recording, so ``diagnose`` and ``view`` can use
-it), ``measured_q.csv`` (when the measurement comes from memory), ``replay.csv`` (the Drake replay, same time base, up to the longest horizon), ``tracks.csv``
-(when the tracks come from memory), ``trajectories.png``, and
-``reconstruction.json["verification"]`` = {"drift_m": {"1": …, "50": …}, "energy_residual": …,
-…} written atomically with the rest of the document.
+it), ``replay.csv`` (the Drake replay, same time base, up to the longest horizon), ``tracks.csv``
+and ``measured_q.csv`` (when the tracks and the measurement come from memory),
+``trajectories.png``, and ``reconstruction.json["verification"]`` = {"drift_m": {"1": …, "50":
+…}, "energy_residual": …, …} written atomically with the rest of the document.
 """
 
 from __future__ import annotations
@@ -134,11 +134,17 @@ def reconstruction_recording(
         tracks = read_tracks(path)
     if clouds is None:
         clouds = load_clouds(out)
-    if measured is None and (out / MEASURED_Q).is_file():
-        measured = read_recording(out / MEASURED_Q)
+    if measured is None:
+        measured = load_measured(out)
     seq = load_sequence(sequence)
     return joint_recording(model, tracks, link_tracks(doc, str(out / "reconstruction.json")), seq.wrenches, clouds,
                            measured)
+
+
+def load_measured(out: str | os.PathLike) -> Recording | None:
+    """OUT/measured_q.csv (module docs, step 1), or None where the reconstruction wrote none."""
+    path = Path(out) / MEASURED_Q
+    return read_recording(path) if path.is_file() else None
 
 
 def fine_motion(jr: JointRecording) -> Recording:
@@ -259,7 +265,8 @@ def verify_reconstruction(
             (out / MEASURED_Q).unlink(missing_ok=True)
     else:
         model, doc = load_reconstruction(out)
-        tracks = clouds = measured = None
+        tracks = clouds = None
+        measured = load_measured(out)
     jr = reconstruction_recording(out, sequence, model, doc, tracks, clouds, measured)
     rec = jr.recording
     write_recording(out / "recording.csv", rec)
@@ -279,7 +286,7 @@ def verify_reconstruction(
             for a, b, link in jr.wrenches.contacts],
         "interpolated_samples": {n: int((~jr.values.observed[:, i]).sum()) for i, n in enumerate(model.joint_names)},
         "joint_values": (f"{MEASURED_Q}: the visual fit under the final joints, at the steps the tracks observe"
-                         if (out / MEASURED_Q).is_file() else "tracks.csv"),
+                         if measured is not None else "tracks.csv"),
         "plant": "discrete_1ms" if discrete else "continuous",
         "files": ["recording.csv", "replay.csv", "trajectories.png"],
         "timing_s": {"replay": report.simulated.wall_time_s, "total": time.perf_counter() - start},
