@@ -62,7 +62,7 @@ from ..physics.effects import EFFECTS
 from ..spatial import rms_radius
 from ..symbolic import build_dynamics
 from .inertial_scales import MIN_COM_SCALE, com_scale, has_axis_ratio, link_axis, scaled_inertial, scaled_parameters
-from .problem import Problem, Result
+from .problem import Problem, Result, SolverCache
 from ..stops import stop_limits, stop_spans
 from .gravity_aligned import alignment, bic_test, constraint_rows, prefer_aligned, project, square_direction
 from .structured_hessian import DenseTerms, lagrangian_hessian
@@ -279,7 +279,10 @@ class ScrewProblem:
     n_vis: number of weighted visual residuals (the objective's normaliser).  hess_lag: the
     assembled Lagrangian Hessian (or None).  prior: the ratio prior as a Function of the parameter
     variables (every variable but the states, declaration order), or None.  normalisation: the
-    scales of its terms (:class:`Normalisation`)."""
+    scales of its terms (:class:`Normalisation`).  reuse_key: for a problem on the frame grid, whose
+    pairs, weights and starting point are parameters, bounds and guesses, the key under which a
+    :class:`~.problem.SolverCache` kept for the same :class:`ScrewData` may reuse its solver; None
+    when the terms hold the data as constants."""
 
     problem: Problem
     data: ScrewData
@@ -294,6 +297,7 @@ class ScrewProblem:
     prior: ca.Function | None = None
     defects: ca.Function | None = None
     normalisation: Normalisation | None = None
+    reuse_key: tuple | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -771,6 +775,14 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         v0 = spline(t_grid, 1)
 
     prob = Problem("screw_axes")
+    # a frame-grid problem is rebuilt round after round around refreshed pairs (reuse_key): what
+    # the rounds change is a parameter, so one IPOPT solver serves them all (SolverCache)
+    reusable = not dense
+
+    def given(name: str, value) -> ca.MX | ca.DM:
+        """Data the terms read: a parameter of a reusable problem, else a constant."""
+        return prob.parameter(name, value) if reusable else ca.DM(value)
+
     # --- joint parameters -> theta (MX) and their SX twins for the per-step functions --------
     theta_sx = ca.SX.sym("theta", dyn.theta0.size)
     theta_parts = []
@@ -784,14 +796,15 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
         if not kinematics_held:
             prob.add_constraint(f"unit_axis:{j.name}", ca.sumsqr(a_var) - 1.0)
         if aligned and j.name in aligned and not kinematics_held:
-            prob.add_constraint(f"aligned:{j.name}", ca.mtimes(ca.DM(aligned[j.name]), a_var))
+            prob.add_constraint(f"aligned:{j.name}", ca.mtimes(given(f"aligned_rows:{j.name}", aligned[j.name]), a_var))
         theta_parts.append(a_var)
         axis_of.append(theta_sx[dyn.parameter(f"{j.name}.axis").slice])
         if j.type in ("revolute", "continuous", "helical"):
             o_var = prob.variable(f"origin:{j.name}", 3, *bounds(state.origins[k]), init=state.origins[k])
             if not kinematics_held:
                 a_parent = j.T_parent_joint[:3, :3] @ state.axes[k]
-                prob.add_constraint(f"gauge:{j.name}", ca.dot(ca.DM(a_parent), o_var - ca.DM(state.origins[k])))
+                prob.add_constraint(f"gauge:{j.name}", ca.dot(given(f"gauge_axis:{j.name}", a_parent),
+                                                              o_var - given(f"gauge_origin:{j.name}", state.origins[k])))
             theta_parts.append(o_var)
         if j.type == "helical":
             p_var = prob.variable(f"pitch:{j.name}", 1, *bounds(state.pitches[k]), init=state.pitches[k])
@@ -877,14 +890,16 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
                 Hs, dt = ca.SX.sym("H", 14, 14), ca.SX.sym("dt")
                 zt = ca.vertcat(zv, dt)
                 step = ca.Function(f"vis_{link}", [qs, theta_sx, Hs, dt], [0.5 * ca.mtimes([zt.T, Hs, zt]) / data.delta**2], jit)
-                vals = step.map(len(items))(Q[:, frame_cols.tolist()], theta_mx, np.hstack([c.H_thickness for c in items]),
-                                            t_var - made_at)
+                vals = step.map(len(items))(Q[:, frame_cols.tolist()], theta_mx,
+                                            given(f"H_thickness:{link}", np.hstack([c.H_thickness for c in items])),
+                                            t_var - given(f"thickness_paired:{link}", made_at))
             else:
                 Hs = ca.SX.sym("H", 13, 13)
                 step = ca.Function(f"vis_{link}", [qs, theta_sx, Hs],
                                    [0.5 * ca.mtimes([zv.T, Hs, zv]) / data.delta**2], jit)
-                vals = step.map(len(items))(Q[:, frame_cols.tolist()], theta_mx, np.hstack([c.H for c in items]))
-                vis_blocks.append((step, frame_cols, np.hstack([c.H for c in items])))
+                H = np.hstack([c.H for c in items])
+                vals = step.map(len(items))(Q[:, frame_cols.tolist()], theta_mx, given(f"H:{link}", H))
+                vis_blocks.append((step, frame_cols, H))
             total = total + ca.sum2(vals)
             n_vis += int(sum(c.weights.sum() for c in items))
         terms["vis"] = total
@@ -970,10 +985,11 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
     if use_dyn and use_prior:
         # ½ Σ e²: in the units of the other terms (each ≈ ½ χ²), added with the same weight
         terms["inertia_prior"] = 0.5 * ca.sumsqr(ca.vertcat(*_prior_residuals(prob, ratios, options.inertia_prior_sigma)))
+    cost_scale = given("cost_scale", 1.0 / norm)
     for name, expr in terms.items():
         if name == "energy_residual":  # reported, not minimised
             continue
-        prob.add_cost(name, expr, weight=1.0 / norm)
+        prob.add_cost(name, expr, weight=cost_scale)
     if "energy_residual" in terms:
         prob.add_cost("energy_residual", terms["energy_residual"], weight=0.0)
     if not prob.terms["costs"]:
@@ -1000,7 +1016,7 @@ def build_screw_problem(data: ScrewData, options: ScrewOptions, state: ScrewStat
             hold=None if hold is None else (hold[0], hold[2])))
     scales = Normalisation(v_s, a_s, dyn_mask if use_dyn else None, e_scale if use_energy else None)
     return ScrewProblem(prob, data, options, new_state, frame_cols, dyn, tuple(free), use_dyn, n_vis, hess_lag, prior_fn,
-                        defects, scales)
+                        defects, scales, ("frame_grid", options.jit) if reusable else None)
 
 
 def _prior_residuals(prob: Problem, ratios: list[str], sigma: float) -> list:
@@ -1253,6 +1269,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     if not options.vis and not want_dense:
         raise KinemaforgeError("the screw NLP has nothing to fit: 'vis' is off and 'dyn' has no recorded forces")
     opts = dataclasses.replace(options, dyn=want_dense)
+    solvers = SolverCache()  # the frame-grid rounds' solvers, built once for this data
 
     def run(name, corr, dense, held=frozenset(), converged_only=False, start=None, aligned=None, accept=None,
             stage_options=None, warm=None, commit=True, ipopt=None, resumes=None, kinematics_held=False, log=None):
@@ -1269,8 +1286,11 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         t0 = time.perf_counter()
         sp = build_screw_problem(data, stage_options or opts, start or state, corr, dense, held, aligned,
                                  None if resumes is None else resumes.normalisation, kinematics_held)
-        res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, warm=warm,
-                               options={**_solver_options(options, sp.use_dyn, sp.hess_lag), **(ipopt or {})})
+        ipopt_options = {**_solver_options(options, sp.use_dyn, sp.hess_lag), **(ipopt or {})}
+        if sp.reuse_key is not None and warm is None:
+            res = solvers.solve(sp.problem, sp.reuse_key, max_iter=options.max_iter, tol=1e-8, options=ipopt_options)
+        else:
+            res = sp.problem.solve(max_iter=options.max_iter, tol=1e-8, warm=warm, options=ipopt_options)
         accepted, iterate = False, None
         if np.isfinite(res.objective) and _physical(data, candidate := read_solution(sp, res)):
             # an unconverged iterate is kept only if it fits the observed points no worse (VIS_SLACK)

@@ -150,9 +150,10 @@ def test_an_aligned_fit_stopped_at_max_iter_is_continued_from_its_iterate(monkey
 
     def build_and_stop_cold_aligned_fits(data, options, state, corr, dense, held, aligned, normalisation, *held_kin):
         # every aligned solve not warm-started stops after two iterations (the settling rounds
-        # too, which are kept as they stop)
+        # too, which are kept as they stop); without a reuse key each solves its own problem
         sp = build(data, options, state, corr, dense, held, aligned, normalisation, *held_kin)
         if aligned is not None:
+            sp = dataclasses.replace(sp, reuse_key=None)
             solve = sp.problem.solve
             sp.problem.solve = lambda **kw: solve(**{**kw, "max_iter": 2 if kw.get("warm") is None else kw["max_iter"]})
         return sp

@@ -17,11 +17,13 @@ from kinemaforge_opt.nlp.reconstruction import (
     build_screw_problem,
     correspondences,
     initial_state,
+    read_solution,
     refine_screws,
     residual_gate,
     state_model,
     transforms_world0_t,
 )
+from kinemaforge_opt.nlp.problem import SolverCache
 from kinemaforge_opt.nlp.visual import linear_rows, point_to_plane, z_vector
 from kinemaforge_opt.spatial import axis_angle_error, exp_so3, line_distance, make_transform, normalize
 
@@ -118,6 +120,32 @@ def test_points_of_a_face_the_surface_model_lacks_are_gated_out(monkeypatch):
     monkeypatch.setattr(nlp, "PLANE_GATE_SIGMAS", np.inf)  # the nearest-point gate alone
     ungated = refine_screws(data, ScrewOptions(dyn=False))
     assert np.abs(ungated.q[:, 0] - q).max() > 0.05
+
+
+def test_rounds_on_the_frame_grid_share_one_solver_and_land_where_their_own_would(pushed):
+    """A round's problem rebuilt around the pairs, gauge and start of the round before, with other
+    alignment rows, solved with the first round's solver (SolverCache, as refine_screws's rounds
+    are): it lands where a solver built for it lands, so no data of the first round is left in the
+    shared solver.  A dense problem holds its data as constants and gets no reuse key."""
+    _, data, _ = _noisy_door(lambda n: np.ones(len(n), bool), 0.002)
+    opts = ScrewOptions(dyn=False)
+    cache = SolverCache()
+    state = initial_state(data)
+    first = build_screw_problem(data, opts, state, correspondences(data, state, 200), False,
+                                aligned={"hinge": np.array([[1.0, 0.0, 0.0]])})
+    moved = read_solution(first, cache.solve(first.problem, first.reuse_key))
+    assert np.abs(moved.axes - state.axes).max() > 1e-3 and np.abs(moved.origins - state.origins).max() > 1e-3
+    level = {"hinge": np.array([[0.0, 1.0, 0.0]])}
+    second = build_screw_problem(data, opts, moved, correspondences(data, moved, 200), False, aligned=level)
+    shared = cache.solve(second.problem, second.reuse_key)
+    own = build_screw_problem(data, opts, moved, correspondences(data, moved, 200), False, aligned=level).problem.solve()
+    assert len(cache) == 1 and shared.success and own.success
+    for name, value in own.values.items():
+        np.testing.assert_allclose(shared.values[name], value, atol=1e-9, err_msg=name)
+    assert shared.costs == pytest.approx(own.costs, rel=1e-9)
+    assert abs(shared.values["axis:hinge"][1]) < 1e-9  # this round's rows, not the first's
+    _, dense_data, _ = pushed
+    assert build_screw_problem(dense_data, ScrewOptions(), initial_state(dense_data), None, True).reuse_key is None
 
 
 def test_prismatic_joint_axis_is_recovered():
