@@ -2,6 +2,7 @@
 median on 2 cores for a 30-step, 4-view episode).
 
     PYTHONPATH=. .venv/bin/python -m problems.time_reconstruct [-o DIR] [--repeat 2] [--categories ...]
+        [--against TREE]
 
 Generates instance 0 of each category (``problems.eval_perception.instance_case``: 4 static views
 × 30 steps at 640×480, D435-like noise) into DIR/data once, then runs the command as a user does
@@ -11,12 +12,18 @@ times per object, interleaved, and prints each run's wall, the stages the comman
 each object's best run.  Wall is what a user waits for; the stages leave out the imports
 (~2–4 s).  The machine lines before and after (CPU, cores, load, a speed probe:
 :mod:`problems.machine`) say what the figures were measured on.
+
+``--against TREE``: another source tree (e.g. ``git worktree add /tmp/old <commit>``, with the
+native bridge copied in) is timed as well, each object's runs of the two trees back to back, the
+order alternating per round, so that a drift in the machine's speed falls on both alike; one
+summary per tree.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -32,12 +39,13 @@ DEFAULT_CATEGORIES = ("cabinet", "laptop", "microwave", "refrigerator")
 STAGES = ("load", "clouds", "motion", "proposals+tracks", "resegment", "graph", "nlp", "model")
 
 
-def time_run(sequence: Path, out: Path) -> dict:
-    """One ``kinemaforge reconstruct SEQUENCE -o OUT`` in a new process: its wall [s] and the
-    stage times [s] it wrote."""
+def time_run(sequence: Path, out: Path, tree: Path | None = None) -> dict:
+    """One ``kinemaforge reconstruct SEQUENCE -o OUT`` in a new process (``tree``: the source tree
+    it runs from; default the installed package): its wall [s] and the stage times [s] it wrote."""
+    env = None if tree is None else dict(os.environ, PYTHONPATH=str(tree), KF_TREE=str(tree))
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "kinemaforge_opt.cli", "reconstruct", str(sequence), "-o", str(out)],
-                          capture_output=True, text=True)
+                          capture_output=True, text=True, env=env, cwd=tree)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         raise RuntimeError(f"kinemaforge reconstruct {sequence} exited {proc.returncode}: {proc.stderr.strip()[-500:]}")
@@ -52,25 +60,35 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("-o", "--out", type=Path, default=Path("/tmp/time_reconstruct"), help="working folder")
     ap.add_argument("--repeat", type=int, default=2, help="runs per object, interleaved (the best counts)")
     ap.add_argument("--categories", nargs="+", default=list(DEFAULT_CATEGORIES))
+    ap.add_argument("--against", type=Path, default=None,
+                    help="another source tree to time alongside, run for run (an A/B on the same machine)")
     args = ap.parse_args(argv)
+    if args.against is not None and not (args.against / "kinemaforge_opt" / "cli.py").is_file():
+        raise SystemExit(f"--against {args.against}: not a kinemaforge_opt source tree (no kinemaforge_opt/cli.py)")
+    trees = {"this tree": None} if args.against is None else {"this tree": None, str(args.against): args.against.resolve()}
     print(machine_line())
     cases = {c: instance_case(c, 0) for c in args.categories}
     for c, case in cases.items():
         root = args.out / "data" / case.name
         if not (root / "ground_truth" / "case.json").is_file():
             generate_case(case, root)
-    runs: dict[str, list[dict]] = {c: [] for c in cases}
+    runs: dict[str, dict[str, list[dict]]] = {name: {c: [] for c in cases} for name in trees}
     for k in range(args.repeat):
         for c, case in cases.items():
-            r = time_run(args.out / "data" / case.name / "sequence", args.out / f"run{k}" / case.name)
-            runs[c].append(r)
-            stages = ", ".join(f"{s} {r['stages'][s]:.1f}" for s in (*STAGES, "verify") if s in r["stages"])
-            print(f"  {case.name} run {k + 1}: wall {r['wall']:.2f} s ({stages})", flush=True)
-    best = {c: min(r["wall"] for r in rs) for c, rs in runs.items()}
-    print("best wall per object [s]: " + ", ".join(f"{c} {w:.2f}" for c, w in best.items()))
-    per_run = [statistics.median(rs[k]["wall"] for rs in runs.values()) for k in range(args.repeat)]
-    print(f"median over objects of the best run: {statistics.median(best.values()):.2f} s "
-          f"(median of each round: {', '.join(f'{m:.2f}' for m in per_run)})")
+            for name, tree in (trees.items() if k % 2 == 0 else reversed(trees.items())):
+                out = args.out / f"run{k}" / (case.name if tree is None else f"{case.name}-against")
+                r = time_run(args.out / "data" / case.name / "sequence", out, tree)
+                runs[name][c].append(r)
+                stages = ", ".join(f"{s} {r['stages'][s]:.1f}" for s in (*STAGES, "verify") if s in r["stages"])
+                label = "" if len(trees) == 1 else f" [{name}]"
+                print(f"  {case.name} run {k + 1}{label}: wall {r['wall']:.2f} s ({stages})", flush=True)
+    for name, per_object in runs.items():
+        label = "" if len(trees) == 1 else f"{name}: "
+        best = {c: min(r["wall"] for r in rs) for c, rs in per_object.items()}
+        print(f"{label}best wall per object [s]: " + ", ".join(f"{c} {w:.2f}" for c, w in best.items()))
+        per_run = [statistics.median(rs[k]["wall"] for rs in per_object.values()) for k in range(args.repeat)]
+        print(f"{label}median over objects of the best run: {statistics.median(best.values()):.2f} s "
+              f"(median of each round: {', '.join(f'{m:.2f}' for m in per_run)})")
     print(machine_line("machine after"))
     return 0
 
