@@ -160,8 +160,11 @@ def joint_values(model: ArticulatedModel, tracks: PoseTracks, link_tracks: Mappi
     link_tracks: link name -> the names of the tracks that move with it (the root's may be
     omitted).  The zero configuration is :func:`~kinemaforge_opt.io.tracks.zero_configuration`'s
     (the reconstruction's).  Raises :class:`DataError` naming the link or joint when a moving
-    link has no track, tracks have no orientation, a link is never seen with its parent, or a
-    joint is seen at fewer than two steps."""
+    link has no track, tracks have no orientation, a link is never seen with its parent, a joint
+    is seen at fewer than two steps, or ``measured`` names a joint the model lacks."""
+    if measured is not None and (unknown := [n for n in measured.joint_names if n not in model.joint_names]):
+        raise DataError(f"the measured joint values name {', '.join(map(repr, unknown))}, not a movable joint of the "
+                        f"model; its joints: {', '.join(model.joint_names)}")
     if not tracks.has_orientation:
         raise DataError("joint values need full-pose tracks (x,y,z,qx,qy,qz,qw); these are position-only")
     root = model.root.name

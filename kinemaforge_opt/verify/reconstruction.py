@@ -45,6 +45,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -145,6 +146,16 @@ def load_measured(out: str | os.PathLike) -> Recording | None:
     """OUT/measured_q.csv (module docs, step 1), or None where the reconstruction wrote none."""
     path = Path(out) / MEASURED_Q
     return read_recording(path) if path.is_file() else None
+
+
+def joint_values_source(joint_names: Sequence[str], measured: Recording | None) -> str:
+    """Where the verified joint values come from (``verification.joint_values``): the measurement
+    for the joints it holds, the tracks for the rest, naming them."""
+    if measured is None:
+        return "tracks.csv"
+    text = f"{MEASURED_Q}: the visual fit under the final joints, at the steps the tracks observe"
+    from_tracks = [n for n in joint_names if n not in measured.joint_names]
+    return text + (f"; tracks.csv for {', '.join(from_tracks)} (not in {MEASURED_Q})" if from_tracks else "")
 
 
 def fine_motion(jr: JointRecording) -> Recording:
@@ -285,8 +296,7 @@ def verify_reconstruction(
             {"link": link, "t_s": [float(jr.wrenches.t[a]), float(jr.wrenches.t[b])]}
             for a, b, link in jr.wrenches.contacts],
         "interpolated_samples": {n: int((~jr.values.observed[:, i]).sum()) for i, n in enumerate(model.joint_names)},
-        "joint_values": (f"{MEASURED_Q}: the visual fit under the final joints, at the steps the tracks observe"
-                         if measured is not None else "tracks.csv"),
+        "joint_values": joint_values_source(model.joint_names, measured),
         "plant": "discrete_1ms" if discrete else "continuous",
         "files": ["recording.csv", "replay.csv", "trajectories.png"],
         "timing_s": {"replay": report.simulated.wall_time_s, "total": time.perf_counter() - start},

@@ -203,3 +203,19 @@ def test_measured_joint_values_replace_the_tracks_at_the_steps_they_observe(two_
     short = Recording(tracks.times[:-1], ("door_joint",), door_q[:-1, None])
     with pytest.raises(DataError, match=r"no sample at t = .* of the tracks \(joint 'door_joint'\)"):
         joint_values(model, hidden, links, short)
+    # and one that names a joint the model lacks too
+    stray = Recording(tracks.times, ("door_joint", "lid_joint"), np.column_stack([door_q, door_q]))
+    with pytest.raises(DataError, match="name 'lid_joint', not a movable joint of the model; its joints: door_joint, drawer_joint"):
+        joint_values(model, hidden, links, stray)
+
+
+def test_the_joint_values_source_names_the_joints_the_measurement_lacks():
+    from kinemaforge_opt.io.recording import Recording
+    from kinemaforge_opt.verify.reconstruction import joint_values_source
+
+    door_only = Recording(np.arange(3.0), ("door_joint",), np.zeros((3, 1)))
+    assert joint_values_source(("door_joint", "drawer_joint"), None) == "tracks.csv"
+    assert joint_values_source(("door_joint",), door_only).startswith("measured_q.csv: the visual fit")
+    assert "tracks.csv" not in joint_values_source(("door_joint",), door_only)
+    assert joint_values_source(("door_joint", "drawer_joint"), door_only).endswith(
+        "; tracks.csv for drawer_joint (not in measured_q.csv)")
