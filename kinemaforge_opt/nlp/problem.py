@@ -228,6 +228,7 @@ class CompiledProblem:
         self.solver = ca.nlpsol(problem.name, "ipopt", {"x": x, "p": p, "f": f, "g": g}, opts)
         self.evaluate = ca.Function("terms", [x, p], list(problem._costs.values()) + [c[0] for c in cons])
         self._slices, self._gslices = problem.layout()
+        self._structure = problem.structure()
 
     def _vector(self, source: Problem, attr: str, override: dict | None) -> np.ndarray:
         out = np.concatenate([getattr(source._vars[n], attr) for n in self.names]) if self.names else np.zeros(0)
@@ -247,7 +248,7 @@ class CompiledProblem:
         built again around other data, whose guesses, bounds and parameter values are solved
         instead of the compiled problem's (:class:`SolverCache`)."""
         problem = self.problem if source is None else source
-        if problem.structure() != self.problem.structure():
+        if source is not None and source.structure() != self._structure:
             raise KinemaforgeError(f"problem {problem.name!r}: its structure differs from the compiled problem's")
         cons = problem._constraints
         lbg = np.concatenate([c[1] for c in cons.values()]) if cons else np.zeros(0)
