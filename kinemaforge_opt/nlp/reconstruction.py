@@ -64,7 +64,7 @@ from ..symbolic import build_dynamics
 from .inertial_scales import MIN_COM_SCALE, com_scale, has_axis_ratio, link_axis, scaled_inertial, scaled_parameters
 from .problem import Problem, Result, SolverCache
 from ..stops import stop_limits, stop_spans
-from .gravity_aligned import alignment, bic_test, constraint_rows, prefer_aligned, project, square_direction
+from .gravity_aligned import AlignmentTest, alignment, alignment_test, constraint_rows, project, square_direction
 from .structured_hessian import DenseTerms, lagrangian_hessian
 from .visual import Correspondences, SurfaceModel, correspond, surface_model, fixed_subsample, pseudo_huber, robust_value, z_vector
 
@@ -542,6 +542,37 @@ def residual_gate(data: ScrewData, corr: dict[str, list[Correspondences]]) -> fl
         return np.inf
     # never below the Huber width (the point noise level): exact points leave σ̂ ≈ 0
     return float(max(PLANE_GATE_SIGMAS * 1.4826 * np.median(np.abs(r)), data.delta))
+
+
+def truncated_vis_by_step(data: ScrewData, state: ScrewState, corr: dict[str, list[Correspondences]], size: int,
+                          charge: float) -> np.ndarray:
+    """Per observed step (T,): the robust visual term Σ ρ_δ(r)/δ² of its pairs under the motion of
+    ``state``, plus ``charge`` for each of its observed points (at most ``size`` a part) that the
+    gates left out (a truncated loss: no motion gains by pushing points out)."""
+    model = state_model(data, state)
+    cols = np.searchsorted(state.t, data.times)
+    out = np.zeros(data.times.size)
+    for link, items in corr.items():
+        Ts = transforms_world0_t(model, link, state.q[cols])
+        for s, (c, T, pts) in enumerate(zip(items, Ts, data.observed[link])):
+            seen = min(0 if pts is None else len(pts), size)
+            out[s] += robust_value(c, T, data.delta, state.thickness.get(link)) + (seen - c.weights.sum()) * charge
+    return out
+
+
+def dyn_by_step(sp: ScrewProblem, res: Result, times: np.ndarray) -> np.ndarray:
+    """Per observed step (T,) at ``times`` (T,) [s]: the dyn term (½ χ²: Σ ρ of the normalised
+    defects) of the free intervals whose midpoint lies from that step to the next (the ends go to
+    the first and last steps); zeros for a problem without dynamics."""
+    out = np.zeros(times.size)
+    if sp.defects is None:
+        return out
+    D = np.asarray(sp.defects(*[res.values[name] for name in sp.problem.terms["variables"]]))
+    t = sp.state.t
+    mid = ((t[:-1] + t[1:]) / 2)[np.flatnonzero(sp.normalisation.dyn_mask)]
+    steps = np.clip(np.searchsorted(times, mid, side="right") - 1, 0, times.size - 1)
+    np.add.at(out, steps, np.sum(pseudo_huber(D, 1.0), axis=0))
+    return out
 
 
 def vis_value(data: ScrewData, state: ScrewState, corr: dict[str, list[Correspondences]]) -> float:
@@ -1274,8 +1305,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     def run(name, corr, dense, held=frozenset(), converged_only=False, start=None, aligned=None, accept=None,
             stage_options=None, warm=None, commit=True, ipopt=None, resumes=None, kinematics_held=False, log=None):
         """Solve a stage from ``start`` (default: the current state) with ``stage_options``
-        (default: the current ones); ``accept``: a test of a converged result that must also
-        pass; ``warm``: the stopped result whose last iterate ``start`` is (IPOPT warm start), with
+        (default: the current ones); ``accept(problem, result)``: a test of a converged result
+        that must also pass; ``warm``: the stopped result whose last iterate ``start`` is (IPOPT warm start), with
         ``resumes`` its problem (whose :class:`Normalisation` the continuation keeps);
         ``commit``: an accepted result becomes the current state; ``ipopt``: IPOPT options on top
         of :func:`_solver_options`; ``kinematics_held``: only the joint states are fitted
@@ -1296,7 +1327,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             # an unconverged iterate is kept only if it fits the observed points no worse (VIS_SLACK)
             accepted = res.success or (not converged_only and (
                 not corr or vis_value(data, candidate, corr) <= vis_value(data, state, corr) + VIS_SLACK))
-            accepted = bool(accepted and (accept is None or accept(res)))
+            accepted = bool(accepted and (accept is None or accept(sp, res)))
             iterate = candidate
             if accepted and commit:
                 state = candidate
@@ -1406,15 +1437,14 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         # pairs made under the free one: that refused protocol_cabinet_1's plumb door by Δχ² 256,
         # while on pairs refreshed per step the true axis fits the points as well as the 1.07° one.
         charge = float(pseudo_huber(min(plane_gate, data.gate), data.delta)) / data.delta**2
-        n_points = sum(min(0 if pts is None else len(pts), size) for obs in data.observed.values() for pts in obs)
         settled_cache: dict = {}
 
-        def settled(rows: dict[str, np.ndarray], name: str) -> tuple[ScrewState, dict | None, float, int]:
+        def settled(rows: dict[str, np.ndarray], name: str) -> tuple[ScrewState, dict | None, np.ndarray, int]:
             """From the current fit with the axes of ``rows`` projected, rounds of the visual term
             with those axes held aligned (pairs refreshed before each, as in the gated warm-up)
             until nothing moves.  Returns (state on the frame grid, its pairs, its truncated
-            visual score Σ ρ_δ(r)/δ² + points left out × ``charge``, the number of pairs within
-            the gates)."""
+            visual score per step (T,) (:func:`truncated_vis_by_step`), the number of pairs
+            within the gates)."""
             key = tuple((name, rows[name].tobytes()) for name in sorted(rows))
             if key in settled_cache:
                 return settled_cache[key]
@@ -1422,7 +1452,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             start = dataclasses.replace(state, t=data.times.copy(), q=state.q[cols], v=None, axes=np.array(
                 [project(a, rows[j.name]) if j.name in rows else a for a, j in zip(state.axes, data.model.movable_joints)]))
             if corr is None:
-                return start, None, 0.0, 0
+                return start, None, np.zeros(data.times.size), 0
             for r in range(options.rounds):
                 pairs = correspondences(data, start, size, plane_gate=plane_gate)
                 _, _, solved = run(f"{name}_vis_{r + 1}", pairs, False, held, converged_only=True, start=start,
@@ -1435,7 +1465,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                     break
             pairs = correspondences(data, start, size, plane_gate=plane_gate)
             n_in = int(sum(c.weights.sum() for items in pairs.values() for c in items))
-            settled_cache[key] = start, pairs, vis_value(data, start, pairs) + (n_points - n_in) * charge, n_in
+            settled_cache[key] = start, pairs, truncated_vis_by_step(data, start, pairs, size, charge), n_in
             return settled_cache[key]
 
         def non_visual(r: Result, n: int) -> float:
@@ -1444,23 +1474,26 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
 
         def try_aligned(hypotheses: dict[str, tuple[str, np.ndarray]]) -> bool:
             """Refit with the joints of ``hypotheses`` (name -> (kind, rows)) aligned on top of the
-            joints already kept aligned, on the aligned motion's own settled pairs; keep it if the
-            BIC prefers it to the current fit (the parameters saved: their rows)."""
+            joints already kept aligned, on the aligned motion's own settled pairs; keep it unless
+            the free fit is better beyond the BIC's penalty and the noise of the comparison
+            (:func:`~.gravity_aligned.alignment_test`; the parameters saved: their rows)."""
             nonlocal sp, res, corr
             rows = {**kept, **{name: r for name, (_, r) in hypotheses.items()}}
             saved = sum(r.shape[0] for _, r in hypotheses.values())
             n_res = max(sp.n_vis, 1)
-            score_free = settled(kept, "gravity_free")[2] + non_visual(res, n_res)
+            vis_free = settled(kept, "gravity_free")[2]
+            step_free = vis_free + dyn_by_step(sp, res, data.times)
+            score_free = vis_free.sum() + non_visual(res, n_res)
             start, corr_al, vis_al, n_in_al = settled(rows, "gravity_aligned")
             n_al = n_res if corr_al is None else max(n_in_al, 1)
 
-            def j_aligned(r) -> float:  # both scores in the free fit's normalisation
-                return (vis_al + non_visual(r, n_al)) / n_res
+            def test(sp_r: ScrewProblem, r: Result) -> AlignmentTest:  # both scores in the free fit's normalisation
+                per_step = 2.0 * (vis_al + dyn_by_step(sp_r, r, data.times) - step_free)
+                return alignment_test(score_free / n_res, (vis_al.sum() + non_visual(r, n_al)) / n_res, n_res, saved,
+                                      per_step)
 
-            j_free = score_free / n_res
-
-            def accept(r) -> bool:
-                return prefer_aligned(j_free, j_aligned(r), n_res, saved)
+            def accept(sp_r: ScrewProblem, r: Result) -> bool:
+                return test(sp_r, r).kept
 
             if sp.use_dyn:
                 # the free fit's dense states, q shifted by what settling moved at the frames and v
@@ -1479,8 +1512,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             ok = stages[-1]["accepted"]
             tested = "axes: " + ", ".join(f"{name} {kind}" for name, (kind, _) in hypotheses.items())
             if res_al.success:
-                dchi2, bound = bic_test(j_free, j_aligned(res_al), n_res, saved)
-                notes.append(f"{tested} tested (BIC, {saved} parameters): Δχ² {dchi2:.1f} vs {bound:.1f}, "
+                notes.append(f"{tested} tested (BIC, {saved} parameters): {test(sp_al, res_al).describe()}, "
                              f"{'kept' if ok else 'refused'}")
             else:
                 notes.append(f"{tested} tested: the aligned fit did not converge ({res_al.status}), refused")

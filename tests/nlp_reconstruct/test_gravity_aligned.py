@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from kinemaforge_opt.nlp.gravity_aligned import (alignment, constraint_rows, face_directions, prefer_aligned, project,
+from kinemaforge_opt.nlp.gravity_aligned import (alignment, constraint_rows, face_directions, alignment_test, project,
                                                   square_direction)
 from kinemaforge_opt.nlp.reconstruction import ScrewOptions, refine_screws
 from kinemaforge_opt.spatial import axis_angle_error, exp_so3, make_transform, normalize
@@ -49,9 +49,28 @@ def test_constraint_rows_follow_the_joint_frame_and_projection_is_the_nearest_al
 
 def test_bic_keeps_the_aligned_fit_within_its_parameter_penalty():
     n = 1000  # 2 n ΔJ against k ln n = 6.9 per parameter
-    assert prefer_aligned(1.0, 1.0 + 6.0 / (2 * n), n, 1)
-    assert not prefer_aligned(1.0, 1.0 + 8.0 / (2 * n), n, 1)
-    assert prefer_aligned(1.0, 1.0 + 8.0 / (2 * n), n, 2)
+    assert alignment_test(1.0, 1.0 + 6.0 / (2 * n), n, 1).kept
+    assert not alignment_test(1.0, 1.0 + 8.0 / (2 * n), n, 1).kept
+    assert alignment_test(1.0, 1.0 + 8.0 / (2 * n), n, 2).kept
+
+
+def test_a_free_fit_better_only_within_the_comparison_s_noise_keeps_the_aligned_one():
+    """Vuong's statistic against Student's t: Δχ² = 30 over a bound of 2 ln 1000 = 13.8 refuses
+    the aligned fit by the BIC alone; spread over 20 steps as 1.5 ± 3 it is within the steps' own
+    noise (z = 16.2 / 13.8 = 1.18 < t(0.975, 19) = 2.09) and the aligned fit is kept; as
+    1.5 ± 0.3 it is not (z = 11.8)."""
+    n, k = 1000, 2
+    j_al = 1.0 + 30.0 / (2 * n)
+    noisy = 1.5 + 3.0 * np.resize([1.0, -1.0], 20)
+    steady = 1.5 + 0.3 * np.resize([1.0, -1.0], 20)
+    assert not alignment_test(1.0, j_al, n, k).kept
+    verdict = alignment_test(1.0, j_al, n, k, noisy)
+    assert verdict.z == pytest.approx((30.0 - 2 * np.log(n)) / np.sqrt(20 / 19 * 20 * 9.0))
+    assert verdict.critical == pytest.approx(2.093, abs=1e-3)
+    assert verdict.kept and "Vuong z 1.18 vs 2.09" in verdict.describe()
+    assert not alignment_test(1.0, j_al, n, k, steady).kept
+    # too few steps to measure the noise: the BIC alone
+    assert alignment_test(1.0, j_al, n, k, noisy[:2]).z is None
 
 
 def _door_data(axis_world: np.ndarray, sigma: float = 0.003):
