@@ -182,7 +182,8 @@ class AlignmentTest:
     measures that noise from the per-observation differences themselves; the time steps are the
     observations here, since a step's points and its stretch of dynamics share that step's pose
     and pairing.  The aligned fit, the simpler one, is kept unless the free fit is better beyond
-    both the penalty and that noise."""
+    both the penalty and that noise.  (The graph's choice between non-nested parent fits uses the
+    same statistic on its samples, :func:`~kinemaforge_opt.graph.score.closeness_z`.)"""
 
     dchi2: float
     bound: float
