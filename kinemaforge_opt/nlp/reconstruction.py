@@ -325,7 +325,11 @@ class ScrewResult:
     settle), free of the dynamics and energy terms that shaped ``q``: the motion the verifier
     checks the model against; None without a visual term or when no measuring solve converged.
     measure_stages: those solves' records (as ``stages``; not part of the fit, nor of
-    ``success``)."""
+    ``success``).  alignment_tests: one record per gravity-aligned hypothesis tested, in order
+    (:mod:`~.gravity_aligned`): ``joints`` {joint: "plumb" | "level" | "square"}, ``converged``,
+    ``kept``, and for a converged refit the test's ``dchi2``, ``bound``, ``z``, ``critical``
+    (:class:`~.gravity_aligned.AlignmentTest`; z and critical None when the steps could not
+    measure the comparison's noise)."""
 
     model: ArticulatedModel
     q: np.ndarray
@@ -341,6 +345,7 @@ class ScrewResult:
     fitted: tuple[str, ...] = ()
     measured_q: np.ndarray | None = None
     measure_stages: tuple[dict, ...] = ()
+    alignment_tests: tuple[dict, ...] = ()
 
 
 # --- helpers ---------------------------------------------------------------------------------
@@ -1292,7 +1297,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
     options = options or ScrewOptions()
     start = time.perf_counter()
     state = initial_state(data)
-    stages, notes = [], []
+    stages, notes, alignment_tests = [], [], []
     size = options.points_per_part
     want_dense = options.dyn and data.wrenches is not None
     if options.dyn and data.wrenches is None:
@@ -1511,10 +1516,15 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
                                        resumes=sp_al)
             ok = stages[-1]["accepted"]
             tested = "axes: " + ", ".join(f"{name} {kind}" for name, (kind, _) in hypotheses.items())
+            record = {"joints": {name: kind for name, (kind, _) in hypotheses.items()}, "converged": bool(res_al.success),
+                      "kept": bool(ok)}
             if res_al.success:
-                notes.append(f"{tested} tested (BIC, {saved} parameters): {test(sp_al, res_al).describe()}, "
+                verdict = test(sp_al, res_al)
+                alignment_tests.append({**record, **dataclasses.asdict(verdict)})
+                notes.append(f"{tested} tested (BIC, {saved} parameters): {verdict.describe()}, "
                              f"{'kept' if ok else 'refused'}")
             else:
+                alignment_tests.append(record)
                 notes.append(f"{tested} tested: the aligned fit did not converge ({res_al.status}), refused")
             if ok:
                 sp, res, corr = sp_al, res_al, corr_al
@@ -1565,7 +1575,8 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
         notes.append(f"dyn, energy: stop impacts; the terms leave out {where}")
     return ScrewResult(model, state.q[cols], state, terms, int(sum(s["iterations"] for s in stages)),
                        _all_converged(stages), tuple(stages), time.perf_counter() - start,
-                       identified, tuple(notes), identifiability, fitted, measured_q, tuple(measure_stages))
+                       identified, tuple(notes), identifiability, fitted, measured_q, tuple(measure_stages),
+                       tuple(alignment_tests))
 
 
 def _all_converged(stages: list[dict]) -> bool:

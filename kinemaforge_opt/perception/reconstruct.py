@@ -592,6 +592,8 @@ def refine_model(per: Perception, graph: GraphResult, seq, density: float, optio
         "stages": [_stage_record(st) for st in result.stages],
         # the joint values the verifier checks the model against (ScrewResult.measured_q)
         "measure_stages": [_stage_record(st) for st in result.measure_stages],
+        # the gravity-aligned hypotheses tested and their verdicts (ScrewResult.alignment_tests)
+        "alignment_tests": list(result.alignment_tests),
         "options": dataclasses.asdict(options),
         "closed_form": [_line_record(n, lines[n]) for n in lines],
         "mass_ratio": result.state.mass_ratio,

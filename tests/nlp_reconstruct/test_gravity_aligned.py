@@ -128,6 +128,9 @@ def test_a_plumb_door_whose_free_fit_gains_only_within_the_steps_noise_stays_plu
     (note,) = [n for n in r.notes if n.startswith("axes: hinge plumb")]
     dchi2, bound = (float(x) for x in re.search(r"Δχ² (\S+) vs (\S+),", note).groups())
     assert dchi2 > bound and "Vuong z" in note and note.endswith("kept")
+    (record,) = r.alignment_tests
+    assert record["joints"] == {"hinge": "plumb"} and record["kept"] and record["converged"]
+    assert record["dchi2"] == pytest.approx(dchi2, abs=0.05) and record["z"] < record["critical"]
     assert _axis_error_deg(r.model, true) < 1e-6
 
 

@@ -61,6 +61,15 @@ def test_nlp_results_reach_the_urdf_and_the_document(tiny_reconstruction):
     assert rec.measured_q.joint_names == tuple(model.joint_names)
     np.testing.assert_array_equal(rec.measured_q.t, rec.perception.times)
     assert nlp["measure_stages"] and nlp["measure_stages"][0]["stage"] == "measure_1"
+    # each gravity-aligned hypothesis tested, with its verdict (the notes say the same in words); a
+    # plumb axis kept is exactly plumb in the document
+    assert len(nlp["alignment_tests"]) == sum(" tested" in n for n in nlp["notes"]) >= 1
+    axes = {r["name"]: np.asarray(r["axis_world"]) for r in doc["joints"]}
+    for test in nlp["alignment_tests"]:
+        assert {"joints", "converged", "kept"} <= set(test) and set(test["joints"].values()) <= {"plumb", "level", "square"}
+        for name, kind in test["joints"].items():
+            if test["kept"] and kind == "plumb":
+                np.testing.assert_allclose(np.abs(axes[name]), [0.0, 0.0, 1.0], atol=1e-9)
 
 
 def test_without_nlp_the_closed_form_is_kept(tiny_case, tmp_path):
