@@ -74,6 +74,31 @@ def test_a_free_fit_better_only_within_the_comparison_s_noise_keeps_the_aligned_
     assert alignment_test(1.0, j_al, n, k, noisy[:2]).z is None
 
 
+def test_the_per_step_shares_add_up_to_the_terms_the_solver_reports():
+    """Vuong's test splits Δχ² over the time steps: the dyn term's share per step (its free
+    intervals by midpoint) sums to the dyn cost IPOPT's problem reports, and the truncated visual
+    score per step to the robust visual term plus the charge for each point the gates left out."""
+    from kinemaforge_opt.nlp.reconstruction import (build_screw_problem, correspondences, dyn_by_step, initial_state,
+                                                    truncated_vis_by_step, vis_value)
+
+    from .test_screw_nlp import FINE, pushed_door
+
+    _, data, _ = pushed_door(120, 12)
+    opts = ScrewOptions(substep_s=FINE)
+    state = initial_state(data)
+    size = opts.points_per_part
+    corr = correspondences(data, state, size, plane_gate=0.01)
+    sp = build_screw_problem(data, opts, state, corr, dense=True)
+    res = sp.problem.solve(max_iter=5)
+    per_step = dyn_by_step(sp, res, data.times)
+    assert per_step.shape == data.times.shape and np.all(per_step >= 0.0)
+    assert per_step.sum() == pytest.approx(res.costs["dyn"] * max(sp.n_vis, 1), rel=1e-9)
+    left_out = sum(min(len(p), size) for p in data.observed["door"]) - sum(c.weights.sum() for c in corr["door"])
+    assert left_out > 0  # the 1-cm plane gate leaves some of the 2-cm-off closed form's points out
+    vis = truncated_vis_by_step(data, state, corr, size, charge=3.0)
+    assert vis.sum() == pytest.approx(vis_value(data, state, corr) + 3.0 * left_out, rel=1e-12)
+
+
 def _door_data(axis_world: np.ndarray, sigma: float = 0.003):
     """:func:`noisy_door_data` of a door on ``axis_world``, the closed form 2° off the truth.
     Returns (true, data)."""
