@@ -199,6 +199,15 @@ class AlignmentTest:
         return f"Δχ² {self.dchi2:.1f} vs {self.bound:.1f}{vuong}"
 
 
+def step_shares(free: np.ndarray, aligned: np.ndarray) -> np.ndarray:
+    """Each time step's share of Δχ² (χ² units) from the two fits' per-step scores ``free`` and
+    ``aligned`` (T,) (½ χ² units), over the steps where either fit has anything to score: a step
+    where no part is seen and no dynamics run is no observation of either hypothesis."""
+    free, aligned = np.asarray(free, float), np.asarray(aligned, float)
+    scored = (free != 0.0) | (aligned != 0.0)
+    return 2.0 * (aligned - free)[scored]
+
+
 def alignment_test(j_free: float, j_aligned: float, n: int, k: int,
                    per_step: np.ndarray | None = None) -> AlignmentTest:
     """The BIC test of the aligned fit (k fewer parameters, objectives as in :func:`bic_test`)

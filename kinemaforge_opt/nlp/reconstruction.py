@@ -64,7 +64,8 @@ from ..symbolic import build_dynamics
 from .inertial_scales import MIN_COM_SCALE, com_scale, has_axis_ratio, link_axis, scaled_inertial, scaled_parameters
 from .problem import Problem, Result, SolverCache
 from ..stops import stop_limits, stop_spans
-from .gravity_aligned import AlignmentTest, alignment, alignment_test, constraint_rows, project, square_direction
+from .gravity_aligned import (AlignmentTest, alignment, alignment_test, constraint_rows, project, square_direction,
+                              step_shares)
 from .structured_hessian import DenseTerms, lagrangian_hessian
 from .visual import Correspondences, SurfaceModel, correspond, surface_model, fixed_subsample, pseudo_huber, robust_value, z_vector
 
@@ -1493,7 +1494,7 @@ def refine_screws(data: ScrewData, options: ScrewOptions | None = None) -> Screw
             n_al = n_res if corr_al is None else max(n_in_al, 1)
 
             def test(sp_r: ScrewProblem, r: Result) -> AlignmentTest:  # both scores in the free fit's normalisation
-                per_step = 2.0 * (vis_al + dyn_by_step(sp_r, r, data.times) - step_free)
+                per_step = step_shares(step_free, vis_al + dyn_by_step(sp_r, r, data.times))
                 return alignment_test(score_free / n_res, (vis_al.sum() + non_visual(r, n_al)) / n_res, n_res, saved,
                                       per_step)
 

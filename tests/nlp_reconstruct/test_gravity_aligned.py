@@ -10,8 +10,8 @@ import re
 import numpy as np
 import pytest
 
-from kinemaforge_opt.nlp.gravity_aligned import (alignment, constraint_rows, face_directions, alignment_test, project,
-                                                  square_direction)
+from kinemaforge_opt.nlp.gravity_aligned import (alignment, alignment_test, constraint_rows, face_directions, project,
+                                                  square_direction, step_shares)
 from kinemaforge_opt.nlp.reconstruction import ScrewOptions, refine_screws
 from kinemaforge_opt.spatial import axis_angle_error, exp_so3, make_transform, normalize
 
@@ -72,6 +72,8 @@ def test_a_free_fit_better_only_within_the_comparison_s_noise_keeps_the_aligned_
     assert not alignment_test(1.0, j_al, n, k, steady).kept
     # too few steps to measure the noise: the BIC alone
     assert alignment_test(1.0, j_al, n, k, noisy[:2]).z is None
+    # a step where neither fit has anything to score (no part seen, no dynamics) is no observation
+    np.testing.assert_array_equal(step_shares([0.0, 2.0, 0.0, 5.0], [0.0, 3.0, 1.0, 5.0]), [2.0, 2.0, 0.0])
 
 
 def test_the_per_step_shares_add_up_to_the_terms_the_solver_reports():
