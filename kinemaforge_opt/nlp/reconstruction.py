@@ -555,15 +555,18 @@ def truncated_vis_by_step(data: ScrewData, state: ScrewState, corr: dict[str, li
     """Per observed step (T,): the robust visual term Σ ρ_δ(r)/δ² of its pairs under the motion of
     ``state``, plus ``charge`` for each of its observed points (at most ``size`` a part) that the
     gates left out (a truncated loss: no motion gains by pushing points out)."""
-    model = state_model(data, state)
-    cols = np.searchsorted(state.t, data.times)
     out = np.zeros(data.times.size)
-    for link, items in corr.items():
-        Ts = transforms_world0_t(model, link, state.q[cols])
-        for s, (c, T, pts) in enumerate(zip(items, Ts, data.observed[link])):
+    for link, values in robust_values(data, state, corr).items():
+        for s, (value, c, pts) in enumerate(zip(values, corr[link], data.observed[link])):
             seen = min(0 if pts is None else len(pts), size)
-            out[s] += robust_value(c, T, data.delta, state.thickness.get(link)) + (seen - c.weights.sum()) * charge
+            out[s] += value + (seen - c.weights.sum()) * charge
     return out
+
+
+def solved_defects(sp: ScrewProblem, res: Result) -> np.ndarray:
+    """(2n, K) the normalised defects of the solved dense problem over its K free intervals
+    (q̇ = v rows, then v̇ rows; :attr:`ScrewProblem.defects`)."""
+    return np.asarray(sp.defects(*[res.values[name] for name in sp.problem.terms["variables"]]))
 
 
 def dyn_by_step(sp: ScrewProblem, res: Result, times: np.ndarray) -> np.ndarray:
@@ -573,7 +576,7 @@ def dyn_by_step(sp: ScrewProblem, res: Result, times: np.ndarray) -> np.ndarray:
     out = np.zeros(times.size)
     if sp.defects is None:
         return out
-    D = np.asarray(sp.defects(*[res.values[name] for name in sp.problem.terms["variables"]]))
+    D = solved_defects(sp, res)
     t = sp.state.t
     mid = ((t[:-1] + t[1:]) / 2)[np.flatnonzero(sp.normalisation.dyn_mask)]
     steps = np.clip(np.searchsorted(times, mid, side="right") - 1, 0, times.size - 1)
@@ -581,14 +584,23 @@ def dyn_by_step(sp: ScrewProblem, res: Result, times: np.ndarray) -> np.ndarray:
     return out
 
 
-def vis_value(data: ScrewData, state: ScrewState, corr: dict[str, list[Correspondences]]) -> float:
-    """The robust visual term Σ ρ_δ(r)/δ² (not its IRLS surrogate) under the motion of ``state``."""
+def robust_values(data: ScrewData, state: ScrewState, corr: dict[str, list[Correspondences]]) -> dict[str, list[float]]:
+    """Per part, per observed step: ρ_δ(r)/δ² summed over the step's pairs (:func:`~.visual.robust_value`)
+    under the motion of ``state``."""
     model = state_model(data, state)
     cols = np.searchsorted(state.t, data.times)
-    total = 0.0
+    out = {}
     for link, items in corr.items():
         Ts = transforms_world0_t(model, link, state.q[cols])
-        total += sum(robust_value(c, T, data.delta, state.thickness.get(link)) for c, T in zip(items, Ts))
+        out[link] = [robust_value(c, T, data.delta, state.thickness.get(link)) for c, T in zip(items, Ts)]
+    return out
+
+
+def vis_value(data: ScrewData, state: ScrewState, corr: dict[str, list[Correspondences]]) -> float:
+    """The robust visual term Σ ρ_δ(r)/δ² (not its IRLS surrogate) under the motion of ``state``."""
+    total = 0.0
+    for values in robust_values(data, state, corr).values():
+        total += sum(values)
     return float(total)
 
 
@@ -1602,7 +1614,7 @@ def process_noise_scales(sp: ScrewProblem, res: Result) -> tuple[float, float]:
     [MIN_ROW_SIGMA_SHARE, 1] × dyn_sigma.  The q̇ = v rows take up the tracks' measurement noise,
     the v̇ rows the model's force error; one prior scale for both leaves the second, which is what
     determines friction and inertia, weighed far below what the data support."""
-    D = np.asarray(sp.defects(*[res.values[name] for name in sp.problem.terms["variables"]]))
+    D = solved_defects(sp, res)
     n = D.shape[0] // 2
     prior = sp.options.dyn_sigma
     used = sp.options.dyn_row_sigma or (prior, prior)  # the scales D is normalised by
