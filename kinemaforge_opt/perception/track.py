@@ -85,12 +85,17 @@ seen at all).  A step where the other part's pose fails that test for its own po
 track's failure (a glitch its grown points expose), not a contradiction, as long as such steps
 are at most 1 − COMOVING_SHARE of them; they are unobserved after the merge.  One body with one
 motion is the simpler explanation when the images cannot tell the two motions apart, so the
-proposal's points join that part (:func:`absorb`); of several parts the one whose motion the
-images confirm most is taken.  A second drawer moving at other times puts the points in the air
-in front of the body (seen through) and is no explanation — or inside the body, where nothing
-contradicts them but nothing confirms them either: so the other motion must also confirm the
-points (share confirmed minus share seen through, at the steps its track holds) within
-1 − COMOVING_SHARE of what the proposal's own motion confirms (:func:`confirmed`).  The base is
+proposal's points join that part (:func:`absorb`); of several parts the one whose motion puts
+the points on observed surfaces most (confirmed and within the fine ICP radius of a fused point,
+as :meth:`Tracker.fit` ranks poses) is taken.  The free-space test alone does not rank them: its
+tolerance grows with the range to centimetres, so a drawer's floor carried by the drawer above
+it into the open just over the floor is "confirmed" by the floor, while carried by its own drawer
+it is hidden under the one above and confirms nothing (protocol_drawer_0: the lower drawer's
+floor went to the upper drawer, part IoU 0.79).  A second drawer moving at other times puts the
+points in the air in front of the body (seen through) and is no explanation — or inside the
+body, where nothing contradicts them but nothing confirms them either: so the other motion must
+also confirm the points (share confirmed minus share seen through, at the steps its track holds)
+within 1 − COMOVING_SHARE of what the proposal's own motion confirms (:func:`confirmed`).  The base is
 such a body too: a proposal whose points the images never contradict left in place, and confirm
 there as often as its own motion does where that motion moves them, is a piece of the body whose
 track wandered along its own surface (:func:`static_explains`; a drawer open at a few steps, its
@@ -763,19 +768,22 @@ def carried(by: Proposal, anchor: int, s: int, points: np.ndarray) -> np.ndarray
 
 
 def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
-            steps: np.ndarray) -> tuple[np.ndarray, list[int]] | None:
+            steps: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[int]] | None:
     """((len(steps),) per step, the share of (N, 3) world points at step ``anchor``, carried by
-    ``by``'s motion to it, that the images confirm minus those they see through; the steps where
-    ``by``'s track failed), or None when the images contradict the carried points (over
-    MAX_VIOLATED_SHARE seen through, or fewer than MIN_CONSISTENT_SHARE of the judged ones
-    consistent) at a step where ``by``'s pose is acceptable for its own points, or at more than
-    1 − COMOVING_SHARE of the steps (module doc, fragments: a contradiction at a step where
-    ``by``'s own pose fails the images is its track's failure, not the fragment's, when it is
-    one of a few)."""
-    shares, failed = [], []
+    ``by``'s motion to it, that the images confirm minus those they see through; (len(steps),)
+    per step, the same with only the confirmed points on an observed surface counted
+    (:meth:`Tracker.fit`); the steps where ``by``'s track failed), or None when the images
+    contradict the carried points (over MAX_VIOLATED_SHARE seen through, or fewer than
+    MIN_CONSISTENT_SHARE of the judged ones consistent) at a step where ``by``'s pose is
+    acceptable for its own points, or at more than 1 − COMOVING_SHARE of the steps (module doc,
+    fragments: a contradiction at a step where ``by``'s own pose fails the images is its track's
+    failure, not the fragment's, when it is one of a few)."""
+    shares, fits, failed = [], [], []
     own = tracking_subset(by.points)
     for s in steps:
-        cons, viol = tracker.verify(carried(by, anchor, s, points), int(s))
+        x = carried(by, anchor, s, points)
+        verdicts = tracker.verdicts(x, int(s))
+        cons, viol = float(np.mean(verdicts[0])), float(np.mean(verdicts[1]))
         if viol > MAX_VIOLATED_SHARE or cons < MIN_CONSISTENT_SHARE * (cons + viol):
             T = by.Ts_delta[s]
             if acceptable(*tracker.verify(transform_points(T, own), int(s))):
@@ -784,13 +792,14 @@ def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
             if len(failed) > (1.0 - COMOVING_SHARE) * len(steps):
                 return None
         shares.append(cons - viol)
-    return np.array(shares), failed
+        fits.append(tracker.fit(x, int(s), verdicts))
+    return np.array(shares), np.array(fits), failed
 
 
 def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) -> tuple[int | None, int | None, list[int]]:
-    """(index of the proposal whose motion explains ``frag``'s points best, anchor step, the
-    steps where that proposal's track failed: :func:`support`) or (None, None, []) (module doc,
-    fragments)."""
+    """(index of the proposal whose motion explains ``frag``'s points best — puts them on observed
+    surfaces most at the steps its track holds — anchor step, the steps where that proposal's
+    track failed: :func:`support`) or (None, None, []) (module doc, fragments)."""
     x = tracking_subset(frag.points)
     observed = observed_steps(frag)
     best, best_support, best_anchor, failed = None, -np.inf, None, []
@@ -804,17 +813,17 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
         sup = support(tracker, xa, p, a, common)
         if sup is None:
             continue
-        shares, fails = sup
-        mean_support = sum(shares) / len(shares)
-        if mean_support <= best_support:
+        shares, fits, fails = sup
+        held = ~np.isin(common, fails)  # at most 1 - COMOVING_SHARE of them fail (support)
+        on_surface = float(np.mean(fits[held]))
+        if on_surface <= best_support:
             continue
         # the images must not tell the two motions apart: at the steps the other track holds,
         # its motion confirms the points nearly as often as the fragment's own (a drawer's points
         # carried by the drawer above it hide in the body, uncontradicted, but unconfirmed)
-        held = ~np.isin(common, fails)  # at most 1 - COMOVING_SHARE of them fail (support)
         if float(np.mean(shares[held])) < confirmed(tracker, xa, frag, a, common[held]) - (1.0 - COMOVING_SHARE):
             continue
-        best, best_support, failed, best_anchor = k, mean_support, fails, a
+        best, best_support, failed, best_anchor = k, on_surface, fails, a
     return best, best_anchor, failed
 
 

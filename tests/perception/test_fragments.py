@@ -234,3 +234,49 @@ def test_a_body_strip_whose_track_wandered_is_the_bases_and_a_briefly_open_drawe
     assert static_explains(oracle, strip)
     assert not static_explains(oracle, front)
     assert [p.name for p in merge_fragments(oracle, [front, strip])] == ["front"]
+
+
+class _RangeOracle(_Oracle):
+    """The exact oracle with a depth test whose tolerance grows with range, as a real camera's
+    does: a point in the open less than FLOOR_TOLERANCE above the floor in front of the carcass
+    is confirmed by the floor reading behind it.  Drawer B, once pulled out by ``b_out`` [m] (per
+    step), hides what lies under it from the cameras above."""
+
+    FLOOR_TOLERANCE = 0.1  # [m]
+
+    def __init__(self, surfaces: list[np.ndarray], b_out: np.ndarray):
+        super().__init__(surfaces)
+        self.b_out = b_out
+
+    def verdicts(self, points, s):
+        on = self.trees[s].query(points, distance_upper_bound=ON_SURFACE)[0] < np.inf
+        inside = np.all((points > CARCASS[0]) & (points < CARCASS[1]), axis=1)
+        x, y, z = points.T
+        under_b = (y > -self.b_out[s]) & (y < 0.0) & (np.abs(x) < 0.19) & (z < 0.3)
+        hidden = inside | under_b
+        confirmed = ~hidden & (on | ((z <= self.FLOOR_TOLERANCE) & (y < 0.0)))
+        return confirmed.astype(int), (~hidden & ~confirmed).astype(int)
+
+
+def test_a_drawers_floor_joins_its_drawer_though_the_floor_confirms_the_other_drawers_motion():
+    """Drawer A's floor, tracked with a lag of half A's stroke, is a fragment.  Carried by B's motion
+    (B above, pulled over steps 8-16) it lies in the open just above the ground, where a range-sized
+    depth tolerance confirms it at every step; carried by A's own motion it is hidden under B once B
+    is out.  Both motions leave it uncontradicted; A's puts it on observed surfaces (Tracker.fit's
+    test), B's does not, and A takes it in either order of the proposals (ranked by the free-space
+    shares alone, B took it: protocol_drawer_0's lower drawer lost its floor to the upper one)."""
+    (fa, _), (fb, _) = _drawer(0.05), _drawer(0.3)
+    floor_a = _grid(np.linspace(-0.17, 0.17, 18), np.linspace(0.01, 0.39, 20), [0.05])
+    ground = _grid(np.linspace(-0.4, 0.4, 81), np.linspace(-0.6, 0.0, 61), [0.0])
+    ya, yb = _stroke(0), _stroke(8)
+    shift = lambda pts, y: pts - np.array([0.0, y, 0.0])
+    oracle = _RangeOracle([np.concatenate([ground, shift(fa, a), shift(floor_a, a), shift(fb, b)])
+                           for a, b in zip(ya, yb)], yb)
+    front_a = Proposal("front_a", 4, shift(fa, ya[4]), _motion(ya, 4))
+    front_b = Proposal("front_b", 12, shift(fb, yb[12]), _motion(yb, 12))
+    floor = Proposal("floor_a", 6, shift(floor_a, ya[6]), _motion(0.5 * ya, 6))
+    assert explained_by(oracle, floor, [front_b, floor]) == (0, 6, [])  # B alone would do
+    assert explained_by(oracle, floor, [front_a, front_b, floor]) == (0, 6, [])
+    assert explained_by(oracle, floor, [front_b, front_a, floor]) == (1, 6, [])
+    merged = merge_fragments(oracle, [front_a, front_b, floor])
+    assert [(p.name, len(p.points)) for p in merged] == [("front_a", len(fa) + len(floor_a)), ("front_b", len(fb))]
