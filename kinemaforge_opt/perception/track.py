@@ -86,20 +86,25 @@ track's failure (a glitch its grown points expose), not a contradiction, as long
 are at most 1 − COMOVING_SHARE of them; they are unobserved after the merge.  One body with one
 motion is the simpler explanation when the images cannot tell the two motions apart, so the
 proposal's points join that part (:func:`absorb`); of several parts the one whose motion puts
-the points on observed surfaces most (confirmed and within the fine ICP radius of a fused point,
-as :meth:`Tracker.fit` ranks poses) is taken.  The free-space test alone does not rank them: its
-tolerance grows with the range to centimetres, so a drawer's floor carried by the drawer above
-it into the open just over the floor is "confirmed" by the floor, while carried by its own drawer
-it is hidden under the one above and confirms nothing (protocol_drawer_0: the lower drawer's
-floor went to the upper drawer, part IoU 0.79).  A second drawer moving at other times puts the
-points in the air in front of the body (seen through) and is no explanation — or inside the
-body, where nothing contradicts them but nothing confirms them either: so the other motion must
-also confirm the points (share confirmed minus share seen through, at the steps its track holds)
-within 1 − COMOVING_SHARE of what the proposal's own motion confirms (:func:`confirmed`).  The base is
-such a body too: a proposal whose points the images never contradict left in place, and confirm
-there as often as its own motion does where that motion moves them, is a piece of the body whose
-track wandered along its own surface (:func:`static_explains`; a drawer open at a few steps, its
-shut place hidden behind its front then, is confirmed only by its motion there).  A proposal that
+the points on observed surfaces most is taken (confirmed and within the fine ICP radius of a
+fused point, less seen through: :meth:`Tracker.fit`, the test that ranks a track's poses).  A
+second drawer moving at other times puts the points in the air in front of the body (seen
+through) and is no explanation — or inside the body, where nothing contradicts them but no
+surface holds them either: so the other motion must also put the points on observed surfaces,
+at the steps its track holds, within 1 − COMOVING_SHARE as often as the proposal's own motion
+does (:func:`fit_along`).  Both comparisons count the surface, not the free-space test alone:
+its tolerance grows with the range to centimetres, so a drawer's floor carried by the drawer
+above it into the open just over the ground is "confirmed" by the ground, while carried by its
+own drawer it is hidden under the one above (protocol_drawer_0 gave the lower drawer's floor to
+the upper drawer, part IoU 0.79; on a three-drawer chest a piece of the lower drawer that no
+motion puts on a surface as its own does joined the middle one, which a duplicate track of the
+middle drawer then explained).
+
+The base is such a body too: a proposal whose points the images never contradict left in place,
+and confirm there as often as its own motion does where that motion moves them, is a piece of
+the body whose track wandered along its own surface (:func:`static_explains`; a drawer open at a
+few steps, its shut place hidden behind its front then, is confirmed only by its motion there).
+A proposal that
 no one motion explains may hold pieces of several (one drawer's side wall sliding along itself,
 tracked with a strip of the drawer stacked on it): each point goes to the motion, of the other
 proposals' and the base's, that leaves it uncontradicted and under which the images confirm it
@@ -768,17 +773,16 @@ def carried(by: Proposal, anchor: int, s: int, points: np.ndarray) -> np.ndarray
 
 
 def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
-            steps: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[int]] | None:
-    """((len(steps),) per step, the share of (N, 3) world points at step ``anchor``, carried by
-    ``by``'s motion to it, that the images confirm minus those they see through; (len(steps),)
-    per step, the same with only the confirmed points on an observed surface counted
-    (:meth:`Tracker.fit`); the steps where ``by``'s track failed), or None when the images
-    contradict the carried points (over MAX_VIOLATED_SHARE seen through, or fewer than
+            steps: np.ndarray) -> tuple[np.ndarray, list[int]] | None:
+    """((len(steps),) per step, how well the images take (N, 3) world points at step ``anchor``
+    carried by ``by``'s motion to it (:meth:`Tracker.fit`: the share confirmed on an observed
+    surface less the share seen through); the steps where ``by``'s track failed), or None when
+    the images contradict the carried points (over MAX_VIOLATED_SHARE seen through, or fewer than
     MIN_CONSISTENT_SHARE of the judged ones consistent) at a step where ``by``'s pose is
     acceptable for its own points, or at more than 1 − COMOVING_SHARE of the steps (module doc,
     fragments: a contradiction at a step where ``by``'s own pose fails the images is its track's
     failure, not the fragment's, when it is one of a few)."""
-    shares, fits, failed = [], [], []
+    fits, failed = [], []
     own = tracking_subset(by.points)
     for s in steps:
         x = carried(by, anchor, s, points)
@@ -791,9 +795,8 @@ def support(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int,
             failed.append(int(s))
             if len(failed) > (1.0 - COMOVING_SHARE) * len(steps):
                 return None
-        shares.append(cons - viol)
         fits.append(tracker.fit(x, int(s), verdicts))
-    return np.array(shares), np.array(fits), failed
+    return np.array(fits), failed
 
 
 def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) -> tuple[int | None, int | None, list[int]]:
@@ -802,7 +805,7 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
     track failed: :func:`support`) or (None, None, []) (module doc, fragments)."""
     x = tracking_subset(frag.points)
     observed = observed_steps(frag)
-    best, best_support, best_anchor, failed = None, -np.inf, None, []
+    best, best_fit, best_anchor, failed = None, -np.inf, None, []
     for k, p in enumerate(proposals):
         if p is frag:
             continue
@@ -813,18 +816,27 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
         sup = support(tracker, xa, p, a, common)
         if sup is None:
             continue
-        shares, fits, fails = sup
+        fits, fails = sup
         held = ~np.isin(common, fails)  # at most 1 - COMOVING_SHARE of them fail (support)
-        on_surface = float(np.mean(fits[held]))
-        if on_surface <= best_support:
+        fit = float(np.mean(fits[held]))
+        if fit <= best_fit:
             continue
         # the images must not tell the two motions apart: at the steps the other track holds,
-        # its motion confirms the points nearly as often as the fragment's own (a drawer's points
-        # carried by the drawer above it hide in the body, uncontradicted, but unconfirmed)
-        if float(np.mean(shares[held])) < confirmed(tracker, xa, frag, a, common[held]) - (1.0 - COMOVING_SHARE):
+        # its motion puts the points on observed surfaces nearly as often as the fragment's own (a
+        # drawer's points carried by the drawer above it hide in the body, uncontradicted, but
+        # on no surface)
+        if fit < fit_along(tracker, xa, frag, a, common[held]) - (1.0 - COMOVING_SHARE):
             continue
-        best, best_support, failed, best_anchor = k, on_surface, fails, a
+        best, best_fit, failed, best_anchor = k, fit, fails, a
     return best, best_anchor, failed
+
+
+def fit_along(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, steps: np.ndarray) -> float:
+    """Mean over ``steps`` of :meth:`Tracker.fit` of (N, 3) world points at step ``anchor``
+    carried by ``by``'s motion (0 without steps)."""
+    if len(steps) == 0:
+        return 0.0
+    return float(np.mean([tracker.fit(carried(by, anchor, int(s), points), int(s)) for s in steps]))
 
 
 def confirmed(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, steps: np.ndarray) -> float:

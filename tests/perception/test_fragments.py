@@ -264,18 +264,25 @@ def test_a_drawers_floor_joins_its_drawer_though_the_floor_confirms_the_other_dr
     depth tolerance confirms it at every step; carried by A's own motion it is hidden under B once B
     is out.  Both motions leave it uncontradicted; A's puts it on observed surfaces (Tracker.fit's
     test), B's does not, and A takes it in either order of the proposals (ranked by the free-space
-    shares alone, B took it: protocol_drawer_0's lower drawer lost its floor to the upper one)."""
+    shares alone, B took it: protocol_drawer_0's lower drawer lost its floor to the upper one).
+    Tracked truly, the floor is no fragment of B's at all (judged by the free-space shares, the
+    ground's tolerance made B's motion nearly as good as its own, and B took it)."""
     (fa, _), (fb, _) = _drawer(0.05), _drawer(0.3)
-    floor_a = _grid(np.linspace(-0.17, 0.17, 18), np.linspace(0.01, 0.39, 20), [0.05])
+    floor_a = _grid(np.linspace(-0.17, 0.17, 18), np.linspace(0.01, 0.39, 24), [0.05])  # 3 cm strokes miss its rows
     ground = _grid(np.linspace(-0.4, 0.4, 81), np.linspace(-0.6, 0.0, 61), [0.0])
     ya, yb = _stroke(0), _stroke(8)
     shift = lambda pts, y: pts - np.array([0.0, y, 0.0])
-    oracle = _RangeOracle([np.concatenate([ground, shift(fa, a), shift(floor_a, a), shift(fb, b)])
-                           for a, b in zip(ya, yb)], yb)
+    surfaces = [np.concatenate([ground, shift(fa, a), shift(floor_a, a), shift(fb, b)]) for a, b in zip(ya, yb)]
+    oracle = _RangeOracle(surfaces, yb)
     front_a = Proposal("front_a", 4, shift(fa, ya[4]), _motion(ya, 4))
     front_b = Proposal("front_b", 12, shift(fb, yb[12]), _motion(yb, 12))
     floor = Proposal("floor_a", 6, shift(floor_a, ya[6]), _motion(0.5 * ya, 6))
     assert explained_by(oracle, floor, [front_b, floor]) == (0, 6, [])  # B alone would do
+    # tracked truly and seen from cameras B does not block, the floor is on observed surfaces
+    # wherever it is seen, and B's motion puts it on almost none (the ground's tolerance takes it):
+    # no fragment of B's
+    tracked = Proposal("floor_a", 6, floor.points, _motion(ya, 6))
+    assert explained_by(_RangeOracle(surfaces, np.zeros(STEPS)), tracked, [front_b, tracked]) == (None, None, [])
     assert explained_by(oracle, floor, [front_a, front_b, floor]) == (0, 6, [])
     assert explained_by(oracle, floor, [front_b, front_a, floor]) == (1, 6, [])
     merged = merge_fragments(oracle, [front_a, front_b, floor])
