@@ -104,13 +104,12 @@ The base is such a body too: a proposal whose points the images never contradict
 and confirm there as often as its own motion does where that motion moves them, is a piece of
 the body whose track wandered along its own surface (:func:`static_explains`; a drawer open at a
 few steps, its shut place hidden behind its front then, is confirmed only by its motion there).
-A proposal that
-no one motion explains may hold pieces of several (one drawer's side wall sliding along itself,
-tracked with a strip of the drawer stacked on it): each point goes to the motion, of the other
-proposals' and the base's, that leaves it uncontradicted and under which the images confirm it
-most (to the next best when that motion does not explain the piece it takes); when what no motion
-explains is less than a part — counting only points the proposal's own track does not contradict
-either — the proposal is split among them (:func:`explained_in_pieces`).
+A proposal that no one motion explains may hold pieces of several (one drawer's side wall
+sliding along itself, tracked with a strip of the drawer stacked on it): each point goes to the
+motion, of the other proposals' and the base's, that leaves it uncontradicted and under which the
+images confirm it most (to the next best when that motion does not explain the piece it takes);
+when what no motion explains is less than a part — counting only points the proposal's own track
+does not contradict either — the proposal is split among them (:func:`explained_in_pieces`).
 
 Duplicates: a part can be tracked twice, once truly and once by a piece sliding along it (a flat
 door), whose grown points the true motion puts partly in seen-through space, so neither explains
