@@ -699,10 +699,8 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
     points not yet explained by a tracked proposal (within the coarse ICP radius of its moved
     points: closer leftovers are the part's own fringe, seen through a small track error) are
     clustered into new proposals of at least ``tracker.min_points`` points, and each is tracked
-    through the sequence; a proposal seeded on two touching parts is reduced to what better tracks
-    do not hold once they cover its seed (:func:`without_unions`); then every track is refined
-    (:func:`refine`) and the fragments merged (:func:`merge_fragments`), and what is left of a
-    union unplaced is dropped."""
+    through the sequence; a proposal seeded on two touching parts is dropped once better tracks
+    cover it (:func:`without_unions`); then every track is refined (:func:`refine`)."""
     order = seed_order(tracker)
     proposals: list[Proposal] = []
     seeds: dict[str, tuple[int, np.ndarray]] = {}  # a proposal's reference step and seed points
@@ -728,11 +726,8 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
             else:  # a disconnected piece of a tracked part (a drawer's floor behind its front), or
                 # the part itself where its track was cut (a slip)
                 proposals[k] = join(proposals[k], new, a)
-    proposals, reduced = without_unions(tracker, proposals, seeds)
-    if not proposals:
-        return proposals
-    # a union's leftover that no part's motion explains stays unplaced: it is dropped (without_unions)
-    return [p for p in merge_fragments(tracker, refine(tracker, proposals), frozenset(reduced)) if p.name not in reduced]
+    proposals = without_unions(tracker, proposals, seeds)
+    return merge_fragments(tracker, refine(tracker, proposals)) if proposals else proposals
 
 
 def observed_steps(p: Proposal) -> int:
@@ -740,10 +735,8 @@ def observed_steps(p: Proposal) -> int:
     return int(np.isfinite(p.Ts_delta[:, 0, 0]).sum())
 
 
-def without_unions(tracker: Tracker, proposals: list[Proposal],
-                   seeds: dict[str, tuple[int, np.ndarray]]) -> tuple[list[Proposal], set[str]]:
-    """(The proposals in the order they were seeded, each whose seed later ones cover reduced to
-    the points none of them holds; the names of those reduced).
+def without_unions(tracker: Tracker, proposals: list[Proposal], seeds: dict[str, tuple[int, np.ndarray]]) -> list[Proposal]:
+    """The proposals (in the order they were seeded) less each whose seed later ones cover.
 
     Two parts that touch while both move (a drawer pulled out above a door still swinging back)
     are one cluster of moving points at such a step, and a seed taken there follows neither: its
@@ -751,32 +744,20 @@ def without_unions(tracker: Tracker, proposals: list[Proposal],
     along.  Where its track fails or drags, the parts' own moving points are left unexplained and
     seed proposals of their own, later.  When proposals seeded after it and tracked at no fewer
     steps cover COMOVING_SHARE of its seed points (within the fine ICP radius of their moved
-    points at the seed's step), its parts are tracked already: what they hold of it goes.  What
-    is left — a piece it gathered that no other track reaches, such as a drawer's back panel seen
-    only through its open top, joined as a disconnected piece (:func:`_comoving`) — stays with its
-    track as a proposal, when it is at least ``tracker.min_points``, for :func:`merge_fragments` to
-    place in a part (protocol_drawer_0: the upper drawer's back panel, 2.9 k points, had been lost
-    with the union that held it; part IoU 0.86 → 0.93).  The union's track followed no one part,
-    so what no part's motion explains is no evidence of a part of its own: the caller drops it
-    (:func:`propose_and_track`).  ``seeds``: proposal name -> (reference step, (N, 3) seed
-    points)."""
+    points at the seed's step), its parts are tracked already and it is dropped.  ``seeds``:
+    proposal name -> (reference step, (N, 3) seed points)."""
     fine = ICP_FINE_VOXELS * tracker.voxel
-    out, reduced = list(proposals), set()
+    out = list(proposals)
     for k, p in enumerate(proposals):
-        ref, seed = seeds[p.name]  # a proposal's reference step is its seed's
+        ref, seed = seeds[p.name]
         covered = np.zeros(len(seed), dtype=bool)
-        held = np.zeros(len(p.points), dtype=bool)
         for q in proposals[k + 1:]:
             moved = q.points_at(ref) if observed_steps(q) >= observed_steps(p) else None
             if moved is not None:
-                tree = cKDTree(moved)
-                covered |= tree.query(seed, distance_upper_bound=fine, workers=-1)[0] < np.inf
-                held |= tree.query(p.points, distance_upper_bound=fine, workers=-1)[0] < np.inf
+                covered |= cKDTree(moved).query(seed, distance_upper_bound=fine, workers=-1)[0] < np.inf
         if covered.mean() >= COMOVING_SHARE:
-            rest = Proposal(p.name, p.ref, p.points[~held], p.Ts_delta)
-            out = [rest if x is p else x for x in out if x is not p or len(rest.points) >= tracker.min_points]
-            reduced.add(p.name)
-    return out, reduced
+            out = [x for x in out if x is not p]
+    return out
 
 
 def _common_anchor(p: Proposal, q: Proposal) -> tuple[np.ndarray, int | None]:
@@ -983,7 +964,7 @@ def union_fit(tracker: Tracker, p: Proposal, q: Proposal, by: Proposal, anchor: 
     return float(np.mean([tracker.fit(carried(by, anchor, s, x), int(s)) for s in _common_anchor(p, q)[0]]))
 
 
-def merge_fragments(tracker: Tracker, proposals: list[Proposal], leftovers: frozenset[str] = frozenset()) -> list[Proposal]:
+def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
     """The proposals with every fragment absorbed into the part whose motion explains it
     (:func:`explained_by`), smallest proposal first (a part's large front is explained by no
     fragment's lagging track); a proposal that no motion explains but whose points cover another
@@ -991,36 +972,31 @@ def merge_fragments(tracker: Tracker, proposals: list[Proposal], leftovers: froz
     one, with the motion that puts both point sets on observed surfaces better
     (:func:`union_fit`): the covering proposal as it is when its motion wins, else the covered
     one with the covering one's points less those its motion puts in seen-through space
-    (:func:`without_contradicted`).  ``leftovers``: names of what is left of unions
-    (:func:`without_unions`), whose tracks followed no one part: they may be placed in a part,
-    never take a fragment in (protocol_cabinet_multi_1: two door pieces taken in by the leftover,
-    then carried with it into the drawer, made the drawer's points prefer a helix)."""
+    (:func:`without_contradicted`)."""
     out = list(proposals)
     for name in [p.name for p in sorted(proposals, key=lambda p: len(p.points))]:
         frag = next((p for p in out if p.name == name), None)
         if frag is None:  # merged into a smaller duplicate whose motion was kept
             continue
-        at = [i for i, p in enumerate(out) if p is frag or p.name not in leftovers]  # the targets' places in out
-        targets = [out[i] for i in at]
-        k, a, failed = explained_by(tracker, frag, targets)
+        k, a, failed = explained_by(tracker, frag, out)
         if k is not None:
-            out[at[k]] = absorb(tracker, targets[k], frag, a, failed)
+            out[k] = absorb(tracker, out[k], frag, a, failed)
             out = [p for p in out if p is not frag]
             continue
-        k, a = coincident_with(tracker, frag, targets)
+        k, a = coincident_with(tracker, frag, out)
         if k is not None:
-            other = targets[k]
+            other = out[k]
             # kept: the covering proposal (the covered one's points lie on it, but for at most
             # 1 - COMOVING_SHARE that nothing ties to the part); or, when the covered one's motion
             # wins, that one with both point sets, less what its motion contradicts
             if union_fit(tracker, other, frag, frag, a) > union_fit(tracker, other, frag, other, a):
-                out[at[k]] = absorb(tracker, frag, without_contradicted(tracker, other, frag, a), a)
+                out[k] = absorb(tracker, frag, without_contradicted(tracker, other, frag, a), a)
             out = [p for p in out if p is not frag]
         else:
-            pieces = explained_in_pieces(tracker, frag, targets)
+            pieces = explained_in_pieces(tracker, frag, out)
             for k, piece, a, failed in pieces or []:
                 if k is not None:  # a base piece is dropped: its points are the base's
-                    out[at[k]] = absorb(tracker, out[at[k]], piece, a, failed)
+                    out[k] = absorb(tracker, out[k], piece, a, failed)
             if pieces is not None:
                 out = [p for p in out if p is not frag]
     return out

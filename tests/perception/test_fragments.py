@@ -287,13 +287,3 @@ def test_a_drawers_floor_joins_its_drawer_though_the_floor_confirms_the_other_dr
     assert explained_by(oracle, floor, [front_b, front_a, floor]) == (1, 6, [])
     merged = merge_fragments(oracle, [front_a, front_b, floor])
     assert [(p.name, len(p.points)) for p in merged] == [("front_a", len(fa) + len(floor_a)), ("front_b", len(fb))]
-
-
-def test_a_unions_leftover_is_placed_but_takes_no_fragment_in():
-    """The lagging side wall is explained by drawer A's front; with A's front named a union's
-    leftover (its track followed no one part), the wall does not join it and stays as it was."""
-    oracle, (front_a, front_b, wall_a), _, _ = _scene()
-    merged = merge_fragments(oracle, [front_a, front_b, wall_a], frozenset({"front_a"}))
-    assert "wall_a" in [p.name for p in merged]
-    kept = next(p for p in merged if p.name == "front_a")
-    np.testing.assert_array_equal(kept.points, front_a.points)
