@@ -961,7 +961,7 @@ def union_fit(tracker: Tracker, p: Proposal, q: Proposal, by: Proposal, anchor: 
     points (their tracking subsets, taken at the ``anchor`` step) carried from there by ``by``'s
     motion (one of the two)."""
     x = np.concatenate([transform_points(r.Ts_delta[anchor], tracking_subset(r.points)) for r in (p, q)])
-    return float(np.mean([tracker.fit(carried(by, anchor, s, x), int(s)) for s in _common_anchor(p, q)[0]]))
+    return fit_along(tracker, x, by, anchor, _common_anchor(p, q)[0])
 
 
 def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
