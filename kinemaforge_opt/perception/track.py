@@ -644,22 +644,17 @@ class Tracker:
         return part
 
 
-def refine(tracker: Tracker, proposals: list[Proposal], leftovers: frozenset[str] = frozenset()) -> list[Proposal]:
+def refine(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
     """One more fine ICP pass per proposal and step, from its tracked pose, with the grown points
     as source and the targets extended by every point on a tracked part: a part's strip along a
     hinge is static by the free-space test at steps where the part rests, and without it the
-    trimmed ICP slides the part off its true pose toward the part's non-static remainder.
-    ``leftovers``: names of what is left of unions (:func:`without_unions`), passed through as
-    tracked, adding no target: their tracks followed no one part, so the points they pass by are
-    no part's."""
+    trimmed ICP slides the part off its true pose toward the part's non-static remainder."""
     fine = ICP_FINE_VOXELS * tracker.voxel
 
     def target(s: int) -> np.ndarray:
         pts = tracker.clouds[s].points
         keep = tracker.status[s] != STATIC
         for p in proposals:
-            if p.name in leftovers:
-                continue
             moved = p.points_at(s)
             if moved is not None:
                 keep |= cKDTree(moved).query(pts, distance_upper_bound=fine)[0] < np.inf
@@ -669,9 +664,6 @@ def refine(tracker: Tracker, proposals: list[Proposal], leftovers: frozenset[str
     rng = np.random.default_rng(0)
     out = []
     for p in proposals:
-        if p.name in leftovers:
-            out.append(p)
-            continue
         sample = p.points if len(p.points) <= MAX_TRACK_POINTS else p.points[rng.choice(len(p.points), MAX_TRACK_POINTS, replace=False)]
 
         def refined(s: int) -> np.ndarray:
@@ -707,10 +699,8 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
     points not yet explained by a tracked proposal (within the coarse ICP radius of its moved
     points: closer leftovers are the part's own fringe, seen through a small track error) are
     clustered into new proposals of at least ``tracker.min_points`` points, and each is tracked
-    through the sequence; a proposal seeded on two touching parts is reduced to what better tracks
-    do not hold once they cover its seed (:func:`without_unions`); then every track is refined
-    (:func:`refine`) and the fragments merged (:func:`merge_fragments`), and what is left of a
-    union unplaced is dropped."""
+    through the sequence; a proposal seeded on two touching parts is dropped once better tracks
+    cover it (:func:`without_unions`); then every track is refined (:func:`refine`)."""
     order = seed_order(tracker)
     proposals: list[Proposal] = []
     seeds: dict[str, tuple[int, np.ndarray]] = {}  # a proposal's reference step and seed points
@@ -736,12 +726,8 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
             else:  # a disconnected piece of a tracked part (a drawer's floor behind its front), or
                 # the part itself where its track was cut (a slip)
                 proposals[k] = join(proposals[k], new, a)
-    proposals, reduced = without_unions(tracker, proposals, seeds)
-    if not proposals:
-        return proposals
-    # a union's leftover that no part's motion explains stays unplaced: it is dropped (without_unions)
-    leftovers = frozenset(reduced)
-    return [p for p in merge_fragments(tracker, refine(tracker, proposals, leftovers), leftovers) if p.name not in leftovers]
+    proposals = without_unions(tracker, proposals, seeds)
+    return merge_fragments(tracker, refine(tracker, proposals)) if proposals else proposals
 
 
 def observed_steps(p: Proposal) -> int:
@@ -749,10 +735,8 @@ def observed_steps(p: Proposal) -> int:
     return int(np.isfinite(p.Ts_delta[:, 0, 0]).sum())
 
 
-def without_unions(tracker: Tracker, proposals: list[Proposal],
-                   seeds: dict[str, tuple[int, np.ndarray]]) -> tuple[list[Proposal], set[str]]:
-    """(The proposals in the order they were seeded, each whose seed later ones cover reduced to
-    the points none of them holds; the names of those reduced).
+def without_unions(tracker: Tracker, proposals: list[Proposal], seeds: dict[str, tuple[int, np.ndarray]]) -> list[Proposal]:
+    """The proposals (in the order they were seeded) less each whose seed later ones cover.
 
     Two parts that touch while both move (a drawer pulled out above a door still swinging back)
     are one cluster of moving points at such a step, and a seed taken there follows neither: its
@@ -760,32 +744,20 @@ def without_unions(tracker: Tracker, proposals: list[Proposal],
     along.  Where its track fails or drags, the parts' own moving points are left unexplained and
     seed proposals of their own, later.  When proposals seeded after it and tracked at no fewer
     steps cover COMOVING_SHARE of its seed points (within the fine ICP radius of their moved
-    points at the seed's step), its parts are tracked already: what they hold of it goes.  What
-    is left — a piece it gathered that no other track reaches, such as a drawer's back panel seen
-    only through its open top, joined as a disconnected piece (:func:`_comoving`) — stays with its
-    track as a proposal, when it is at least ``tracker.min_points``, for :func:`merge_fragments` to
-    place in a part (protocol_drawer_0: the upper drawer's back panel, 2.9 k points, had been lost
-    with the union that held it; part IoU 0.84 → 0.90).  The union's track followed no one part,
-    so what no part's motion explains is no evidence of a part of its own: the caller drops it
-    (:func:`propose_and_track`).  ``seeds``: proposal name -> (reference step, (N, 3) seed
-    points)."""
+    points at the seed's step), its parts are tracked already and it is dropped.  ``seeds``:
+    proposal name -> (reference step, (N, 3) seed points)."""
     fine = ICP_FINE_VOXELS * tracker.voxel
-    out, reduced = list(proposals), set()
+    out = list(proposals)
     for k, p in enumerate(proposals):
-        ref, seed = seeds[p.name]  # a proposal's reference step is its seed's
+        ref, seed = seeds[p.name]
         covered = np.zeros(len(seed), dtype=bool)
-        held = np.zeros(len(p.points), dtype=bool)
         for q in proposals[k + 1:]:
             moved = q.points_at(ref) if observed_steps(q) >= observed_steps(p) else None
             if moved is not None:
-                tree = cKDTree(moved)
-                covered |= tree.query(seed, distance_upper_bound=fine, workers=-1)[0] < np.inf
-                held |= tree.query(p.points, distance_upper_bound=fine, workers=-1)[0] < np.inf
+                covered |= cKDTree(moved).query(seed, distance_upper_bound=fine, workers=-1)[0] < np.inf
         if covered.mean() >= COMOVING_SHARE:
-            rest = Proposal(p.name, p.ref, p.points[~held], p.Ts_delta)
-            out = [rest if x is p else x for x in out if x is not p or len(rest.points) >= tracker.min_points]
-            reduced.add(p.name)
-    return out, reduced
+            out = [x for x in out if x is not p]
+    return out
 
 
 def _common_anchor(p: Proposal, q: Proposal) -> tuple[np.ndarray, int | None]:
@@ -864,22 +836,6 @@ def fit_along(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, s
     if len(steps) == 0:
         return 0.0
     return float(np.mean([tracker.fit(carried(by, anchor, int(s), points), int(s)) for s in steps]))
-
-
-def moves_with(tracker: Tracker, frag: Proposal, part: Proposal, anchor: int, failed: list[int]) -> bool:
-    """Whether ``part``'s motion puts ``frag``'s points (as at the ``anchor`` step) on observed
-    surfaces more often than leaving them in place does, beyond a tie (:func:`fit_tie`), at the
-    steps both observe but ``part``'s ``failed`` ones.  A union's leftover has no track of its
-    own to weigh a part's motion against (:func:`explained_by` compares with the fragment's own),
-    so the base's stands in (protocol_drawer_0@s10: a leftover of the upper drawer, whose own
-    track held it poorly there, fitted the lower drawer's motion 0.376 against 0.372 left in
-    place, and joined it)."""
-    steps = _common_anchor(frag, part)[0]
-    steps = steps[~np.isin(steps, failed)]
-    x = transform_points(frag.Ts_delta[anchor], tracking_subset(frag.points))
-    moved = fit_along(tracker, x, part, anchor, steps)
-    still = float(np.mean([tracker.fit(x, int(s)) for s in steps])) if len(steps) else 0.0
-    return moved > still + fit_tie(moved, len(x))
 
 
 def confirmed(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, steps: np.ndarray) -> float:
@@ -1008,7 +964,7 @@ def union_fit(tracker: Tracker, p: Proposal, q: Proposal, by: Proposal, anchor: 
     return fit_along(tracker, x, by, anchor, _common_anchor(p, q)[0])
 
 
-def merge_fragments(tracker: Tracker, proposals: list[Proposal], leftovers: frozenset[str] = frozenset()) -> list[Proposal]:
+def merge_fragments(tracker: Tracker, proposals: list[Proposal]) -> list[Proposal]:
     """The proposals with every fragment absorbed into the part whose motion explains it
     (:func:`explained_by`), smallest proposal first (a part's large front is explained by no
     fragment's lagging track); a proposal that no motion explains but whose points cover another
@@ -1016,47 +972,38 @@ def merge_fragments(tracker: Tracker, proposals: list[Proposal], leftovers: froz
     one, with the motion that puts both point sets on observed surfaces better
     (:func:`union_fit`): the covering proposal as it is when its motion wins, else the covered
     one with the covering one's points less those its motion puts in seen-through space
-    (:func:`without_contradicted`).  ``leftovers``: names of what is left of unions
-    (:func:`without_unions`), whose tracks followed no one part: they may be placed in a part,
-    but never take a fragment in (protocol_cabinet_multi_1: two door pieces taken in by the
-    leftover, then carried with it into the drawer, made the drawer's points prefer a helix) nor
-    lend a part their motion (protocol_cabinet_multi_0: a 758-point leftover lying on the door,
-    whose track put both point sets on surfaces better, replaced the door's track, and the door
-    became a slide)."""
+    (:func:`without_contradicted`)."""
     out = list(proposals)
     for name in [p.name for p in sorted(proposals, key=lambda p: len(p.points))]:
         frag = next((p for p in out if p.name == name), None)
         if frag is None:  # merged into a smaller duplicate whose motion was kept
             continue
-        at = [i for i, p in enumerate(out) if p is frag or p.name not in leftovers]  # the targets' places in out
-        targets = [out[i] for i in at]
-        k, a, failed = explained_by(tracker, frag, targets)
-        if k is not None and (frag.name not in leftovers or moves_with(tracker, frag, targets[k], a, failed)):
-            out[at[k]] = absorb(tracker, targets[k], frag, a, failed)
+        k, a, failed = explained_by(tracker, frag, out)
+        if k is not None:
+            out[k] = absorb(tracker, out[k], frag, a, failed)
             out = [p for p in out if p is not frag]
             continue
-        k, a = coincident_with(tracker, frag, targets)
+        k, a = coincident_with(tracker, frag, out)
         if k is not None:
-            other = targets[k]
+            other = out[k]
             # kept: the covering proposal (the covered one's points lie on it, but for at most
             # 1 - COMOVING_SHARE that nothing ties to the part); or, when the covered one's motion
-            # wins, that one with both point sets, less what its motion contradicts — never a
-            # leftover's motion, which followed no one part
-            if frag.name not in leftovers and union_fit(tracker, other, frag, frag, a) > union_fit(tracker, other, frag, other, a):
-                out[at[k]] = absorb(tracker, frag, without_contradicted(tracker, other, frag, a), a)
+            # wins, that one with both point sets, less what its motion contradicts
+            if union_fit(tracker, other, frag, frag, a) > union_fit(tracker, other, frag, other, a):
+                out[k] = absorb(tracker, frag, without_contradicted(tracker, other, frag, a), a)
             out = [p for p in out if p is not frag]
         else:
-            pieces = explained_in_pieces(tracker, frag, targets, frag.name in leftovers)
+            pieces = explained_in_pieces(tracker, frag, out)
             for k, piece, a, failed in pieces or []:
                 if k is not None:  # a base piece is dropped: its points are the base's
-                    out[at[k]] = absorb(tracker, out[at[k]], piece, a, failed)
+                    out[k] = absorb(tracker, out[k], piece, a, failed)
             if pieces is not None:
                 out = [p for p in out if p is not frag]
     return out
 
 
-def explained_in_pieces(tracker: Tracker, frag: Proposal, proposals: list[Proposal],
-                        leftover: bool = False) -> list[tuple[int | None, Proposal, int, list[int]]] | None:
+def explained_in_pieces(tracker: Tracker, frag: Proposal,
+                        proposals: list[Proposal]) -> list[tuple[int | None, Proposal, int, list[int]]] | None:
     """The pieces of ``frag`` that other motions explain, when together they leave fewer than
     ``tracker.min_points`` of the points its own track explains (module doc, fragments: a piece
     of one drawer that slides along itself, tracked with a strip of the drawer stacked on it),
@@ -1072,8 +1019,7 @@ def explained_in_pieces(tracker: Tracker, frag: Proposal, proposals: list[Propos
     by any motion along it, a point hidden under every motion by none — the motion nearest
     ``frag``'s own track, which lags or wanders but follows its part more than any other).  When
     a motion does not explain the piece it takes, or that piece is smaller than a part, those
-    points go to their next best motion, until every piece is explained.  A piece of a union's
-    leftover (``leftover``) must also move with the part (:func:`moves_with`)."""
+    points go to their next best motion, until every piece is explained."""
     sample = tracking_subset(frag.points)  # judged on the sample; each point takes its nearest's lot
     nearest = cKDTree(sample).query(frag.points, workers=-1)[1]
     candidates = []  # (index or None, anchor, (n,) uncontradicted, (n,) mean support, distance)
@@ -1116,8 +1062,7 @@ def explained_in_pieces(tracker: Tracker, frag: Proposal, proposals: list[Propos
                     verdict[key] = (static_explains(tracker, piece), [])
                 else:
                     j, _, failed = explained_by(tracker, piece, [proposals[k], piece])
-                    moves = j is not None and (not leftover or moves_with(tracker, piece, proposals[k], a, failed))
-                    verdict[key] = (moves, failed)
+                    verdict[key] = (j is not None, failed)
             explained, failed = verdict[key]
             if not explained:
                 refused = (i, mine)

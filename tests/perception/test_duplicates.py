@@ -116,17 +116,3 @@ def test_a_neighbouring_drawer_is_no_duplicate():
     assert coincident_with(oracle, rest, [true, rest]) == (None, None)
     assert coincident_with(oracle, true, [true, rest]) == (None, None)
     assert [p.name for p in merge_fragments(oracle, [true, rest])] == ["true", "other"]
-
-
-def test_a_unions_leftover_on_a_part_never_lends_it_its_motion():
-    """A union's leftover (:func:`without_unions`) lying on a part goes, and the part keeps its own
-    motion even where the leftover's would put both point sets on the surface better: the union's
-    track followed no one part, so its fit on the few points left of it says nothing of the part's
-    motion elsewhere (protocol_cabinet_multi_0: a 758-point leftover replaced a door's track)."""
-    oracle, true, dup, rest = _scene()
-    end = true.points[true.points[:, 0] >= 0.05]
-    small = Proposal("small", REF, end, true.Ts_delta)  # as in the test above, but a leftover
-    big = Proposal("big", REF, np.concatenate([true.points, _air(true.points, 0.12)]), dup.Ts_delta)
-    merged = merge_fragments(oracle, [big, small, rest], frozenset({"small"}))
-    assert [p.name for p in merged] == ["big", "other"]
-    assert merged[0].Ts_delta is big.Ts_delta and merged[0].points is big.points

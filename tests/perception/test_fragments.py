@@ -10,7 +10,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from kinemaforge_opt.perception.track import (ICP_FINE_VOXELS, Proposal, Tracker, absorb, explained_by, explained_in_pieces,
-                                              merge_fragments, moves_with, static_explains)
+                                              merge_fragments, static_explains)
 
 STEPS = 16
 CARCASS = (np.array([-0.2, 0.0, 0.0]), np.array([0.2, 0.4, 0.6]))  # box [m]; drawers pull along -y
@@ -287,28 +287,3 @@ def test_a_drawers_floor_joins_its_drawer_though_the_floor_confirms_the_other_dr
     assert explained_by(oracle, floor, [front_b, front_a, floor]) == (1, 6, [])
     merged = merge_fragments(oracle, [front_a, front_b, floor])
     assert [(p.name, len(p.points)) for p in merged] == [("front_a", len(fa) + len(floor_a)), ("front_b", len(fb))]
-
-
-def test_a_unions_leftover_is_placed_but_takes_no_fragment_in():
-    """The lagging side wall is explained by drawer A's front; with A's front named a union's
-    leftover (its track followed no one part), the wall does not join it and stays as it was."""
-    oracle, (front_a, front_b, wall_a), _, _ = _scene()
-    merged = merge_fragments(oracle, [front_a, front_b, wall_a], frozenset({"front_a"}))
-    assert "wall_a" in [p.name for p in merged]
-    kept = next(p for p in merged if p.name == "front_a")
-    np.testing.assert_array_equal(kept.points, front_a.points)
-
-
-def test_a_piece_moves_with_a_part_only_where_the_part_moves():
-    """moves_with: A's side wall is carried onto A's surfaces by A's motion and left in place it is
-    not (A opens over steps 0-8), so it moves with A.  B's side wall, seen at steps 0-7 only, where
-    B rests, is put on B's surfaces by B's motion exactly as well as left in place: no evidence that
-    it moves with B, on which a union's leftover, with no track of its own to weigh B's motion
-    against, must not join B."""
-    oracle, (front_a, front_b, wall_a), _, _ = _scene()
-    assert moves_with(oracle, wall_a, front_a, 4, [])
-    _, wb = _drawer(0.3)
-    Ts = _motion(0.5 * _stroke(0), 4)  # a track that followed neither drawer
-    Ts[8:] = np.nan
-    wall_b = Proposal("wall_b", 4, wb, Ts)  # B is shut at step 4
-    assert not moves_with(oracle, wall_b, front_b, 4, [])

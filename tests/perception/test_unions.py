@@ -4,11 +4,9 @@ A drawer pulled out right above a door that still swings back touches it: at suc
 moving points are one cluster.  The proposal seeded there follows neither part, so its track is
 lost wherever their motions part (or it follows one and drags the other's points along).  When
 the two parts are tracked from seeds of their own, at
-no fewer steps, after it, and their moved points cover the union's seed, the union is dropped,
-but for a piece it gathered that neither part's proposal holds, which stays as a proposal of its
-own (for the fragment stage to place) when it is a part's size.  A proposal whose seed they cover
-only in part, or whose track is longer than theirs, stays, and so does a part seeded after a
-union."""
+no fewer steps, after it, and their moved points cover the union's seed, the union is dropped.
+A proposal whose seed they cover only in part, or whose track is longer than theirs, stays, and
+so does a part seeded after a union."""
 
 from __future__ import annotations
 
@@ -37,7 +35,7 @@ def _proposal(name: str, points: np.ndarray, ref: int, seen: list[int]) -> Propo
 
 DOOR = _slab((0.0, 0.0, 0.0), (0.5, 0.0, 0.5))
 DRAWER = _slab((0.0, -0.2, 0.51), (0.5, 0.0, 0.51))
-TRACKER = SimpleNamespace(voxel=VOXEL, min_points=50)
+TRACKER = SimpleNamespace(voxel=VOXEL)
 ALL = list(range(STEPS))
 
 
@@ -47,32 +45,13 @@ def test_a_union_of_two_tracked_parts_is_dropped(union_seen):
     props = [_proposal("u", union, 6, union_seen), _proposal("door", DOOR, 1, ALL),
              _proposal("drawer", DRAWER, 2, ALL)]
     seeds = {"u": (6, union), "door": (1, DOOR), "drawer": (2, DRAWER)}
-    out, reduced = without_unions(TRACKER, props, seeds)
-    assert [p.name for p in out] == ["door", "drawer"] and reduced == {"u"}
+    assert [p.name for p in without_unions(TRACKER, props, seeds)] == ["door", "drawer"]
 
 
 def test_a_proposal_covered_in_part_by_shorter_tracks_or_before_stays():
     union = np.concatenate([DOOR, DRAWER])
     half = [_proposal("u", union, 6, ALL), _proposal("door", DOOR, 1, ALL)]  # the door inside the union
-    assert [p.name for p in without_unions(TRACKER, half, {"u": (6, union), "door": (1, DOOR)})[0]] == ["u", "door"]
+    assert [p.name for p in without_unions(TRACKER, half, {"u": (6, union), "door": (1, DOOR)})] == ["u", "door"]
     shorter = [_proposal("u", union, 6, ALL), _proposal("door", DOOR, 1, [1, 2, 6]), _proposal("drawer", DRAWER, 2, [2, 6])]
     seeds = {"u": (6, union), "door": (1, DOOR), "drawer": (2, DRAWER)}
-    assert without_unions(TRACKER, shorter, seeds)[1] == set()
-    assert [p.name for p in without_unions(TRACKER, shorter, seeds)[0]] == ["u", "door", "drawer"]
-
-
-def test_a_piece_only_the_union_holds_stays_with_its_track_and_a_smaller_one_goes():
-    """The union also holds the drawer's back panel, 20 cm behind its front (seen only through the
-    open top, joined as a disconnected piece): the parts' own proposals do not hold it, so it
-    stays, with the union's name, reference and track, named as reduced (the fragment stage places
-    it in a part or it is dropped); a piece smaller than a part goes."""
-    back = _slab((0.0, 0.2, 0.52), (0.5, 0.2, 0.6))  # 459 points
-    union = np.concatenate([DOOR, DRAWER, back])
-    seeds = {"u": (6, np.concatenate([DOOR, DRAWER])), "door": (1, DOOR), "drawer": (2, DRAWER)}
-    props = [_proposal("u", union, 6, [4, 5, 6, 7]), _proposal("door", DOOR, 1, ALL), _proposal("drawer", DRAWER, 2, ALL)]
-    out, reduced = without_unions(TRACKER, props, seeds)
-    assert [p.name for p in out] == ["u", "door", "drawer"] and reduced == {"u"}
-    np.testing.assert_array_equal(out[0].points, back)
-    assert out[0].ref == 6 and out[0].Ts_delta is props[0].Ts_delta
-    small = [_proposal("u", np.concatenate([DOOR, DRAWER, back[:40]]), 6, [4, 5, 6, 7]), *props[1:]]
-    assert [p.name for p in without_unions(TRACKER, small, seeds)[0]] == ["door", "drawer"]
+    assert [p.name for p in without_unions(TRACKER, shorter, seeds)] == ["u", "door", "drawer"]
