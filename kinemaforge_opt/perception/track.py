@@ -29,6 +29,9 @@ them on it).  Only when no result is acceptable are principal-axes alignments on
 clusters at s tried (re-detection).  The images accept every alignment of a symmetric part (a
 flat door turned half a turn about its normal covers the same surface), so of the acceptable
 re-detections the one nearest the constant-velocity prediction is kept (:func:`displacement`).
+Where the kept result fits worse than the previous step's beyond that tie, ICP is also tried
+from the reference orientation (:meth:`Tracker.unturn`): a turn a flat face hardly shows, once
+in a pose, is carried on by both guesses.
 With no acceptable candidate the proposal is unobserved at s (NaN: occluded or out of view), and
 the next step starts from the last solved pose.
 
@@ -241,6 +244,16 @@ def _predict(poses: list[np.ndarray], ahead: int = 1) -> np.ndarray:
     if len(poses) < 2:
         return poses[-1]
     return np.linalg.matrix_power(poses[-1] @ np.linalg.inv(poses[-2]), ahead) @ poses[-1]
+
+
+def _unturned(poses: list[np.ndarray], points: np.ndarray) -> np.ndarray:
+    """(4, 4) the translation that carries the centroid of (N, 3) reference ``points`` [m] where
+    the constant-velocity extrapolation of (4, 4) ``poses`` puts it, without turning them: the
+    track's turn so far undone."""
+    c = points.mean(axis=0)
+    T = np.eye(4)
+    T[:3, 3] = transform_points(_predict(poses), c[None])[0] - c
+    return T
 
 
 def surface_normals(points: np.ndarray) -> np.ndarray:
@@ -471,8 +484,14 @@ class Tracker:
         (module doc): narrow and wide coarse ICP from each distinct guess, the fine pass from each
         distinct coarse pose, and of the acceptable results the best :meth:`fit`; with none,
         :meth:`redetect`."""
+        return self.solve_step_fit(points, s, guesses)[0]
+
+    def solve_step_fit(self, points: np.ndarray, s: int,
+                       guesses: list[np.ndarray]) -> tuple[np.ndarray | None, float | None]:
+        """:meth:`solve_step`'s pose and its :meth:`fit` (None with no pose), from the verdicts
+        the step made."""
         if self.trees[s] is None or len(self.targets[s]) < 3:
-            return None
+            return None, None
         apart = START_SEPARATION_VOXELS * self.voxel
         starts: list[tuple[np.ndarray, np.ndarray]] = []  # (coarse pose, ICP source)
         for k, T0 in enumerate(guesses):
@@ -491,13 +510,27 @@ class Tracker:
             if acceptable(float(np.mean(cons)), float(np.mean(viol))):
                 found.append((T, moved, (cons, viol)))
         if not found:
-            return self.redetect(points, s, guesses[0])
-        if len(found) == 1:
-            return found[0][0]
+            T = self.redetect(points, s, guesses[0])
+            return (None, None) if T is None else (T, self.fit(transform_points(T, points), s))
         # of the fits within FIT_TIE_SIGMAS of the best, the first in the guesses' order
         fits = np.array([self.fit(f[1], s, f[2]) for f in found])
         best = float(fits.max())
-        return next(f[0] for f, x in zip(found, fits) if x >= best - fit_tie(best, len(points)))
+        return next((f[0], float(x)) for f, x in zip(found, fits) if x >= best - fit_tie(best, len(points)))
+
+    def unturn(self, points: np.ndarray, s: int, T: np.ndarray, fit: float, solved: list[np.ndarray],
+               last_fit: float | None) -> tuple[np.ndarray, float]:
+        """The (4, 4) pose of (N, 3) reference ``points`` at step s and its :meth:`fit`, from
+        :meth:`solve_step`'s ``T`` with its ``fit``, after the (4, 4) poses ``solved``.  Where
+        that fit falls below ``last_fit`` (the previous step's) beyond the tie, the track may have left the
+        part's basin: a turn the surface hardly sees (a drawer front spun about its normal), once
+        in a pose, is carried on by both guesses and grows step by step (cabinet_multi_1's drawer:
+        1 → 9.5° while it slides, where the true pose fits better beyond the tie).  Then ICP
+        from the reference orientation (:func:`_unturned`) is tried, and kept where it fits
+        better beyond the tie."""
+        if last_fit is None or fit >= last_fit - fit_tie(last_fit, len(points)):
+            return T, fit
+        U, fit_u = self.solve_step_fit(points, s, [_unturned(solved, points)])
+        return (U, fit_u) if U is not None and fit_u > fit + fit_tie(fit_u, len(points)) else (T, fit)
 
     def redetect(self, points: np.ndarray, s: int, prediction: np.ndarray) -> np.ndarray | None:
         """Principal-axes alignments of (N, 3) reference points onto the moving clusters at step
@@ -535,10 +568,13 @@ class Tracker:
             # step is judged once the second side is tracked)
             lead = [sides[0][0][1]] if sides and len(sides[0][0]) > 1 else []
             s = ref + direction
+            last_fit = None
             while 0 <= s < n:
                 # constant velocity first, then the last pose
                 guesses = [_predict(solved), solved[-1]] if len(solved) >= 2 else [solved[-1]]
-                T = self.solve_step(sample, s, guesses)
+                T, fit = self.solve_step_fit(sample, s, guesses)
+                if T is not None and len(solved) >= 2:
+                    T, last_fit = self.unturn(sample, s, T, fit, solved, last_fit)
                 s += direction
                 if T is None:
                     continue

@@ -112,14 +112,14 @@ def test_a_lid_slammed_shut_is_no_slip():
 
 
 class _Scripted(Tracker):
-    """A tracker whose per-step solver returns scripted world motions (NaN: none verifies), to
-    test the slip handling of :meth:`Tracker.track` alone; no growing."""
+    """A tracker whose per-step solver returns scripted world motions (NaN: none verifies), each
+    fitting fully, to test the slip handling of :meth:`Tracker.track` alone; no growing."""
 
     def __init__(self, poses: list[np.ndarray], voxel: float = 0.006):
         self.clouds, self.voxel, self.poses = [None] * len(poses), voxel, poses
 
-    def solve_step(self, points, s, guesses):
-        return None if np.isnan(self.poses[s]).any() else self.poses[s]
+    def solve_step_fit(self, points, s, guesses):
+        return (None, None) if np.isnan(self.poses[s]).any() else (self.poses[s], 1.0)
 
     def grow(self, ref, points, Ts):
         return points
