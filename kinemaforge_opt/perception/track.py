@@ -521,12 +521,12 @@ class Tracker:
                last_fit: float | None) -> tuple[np.ndarray, float]:
         """The (4, 4) pose of (N, 3) reference ``points`` at step s and its :meth:`fit`, from
         :meth:`solve_step`'s ``T`` with its ``fit``, after the (4, 4) poses ``solved``.  Where
-        that fit falls below ``last_fit`` (the previous step's) beyond the tie, the track may have left the
-        part's basin: a turn the surface hardly sees (a drawer front spun about its normal), once
-        in a pose, is carried on by both guesses and grows step by step (cabinet_multi_1's drawer:
-        1 → 9.5° while it slides, where the true pose fits better beyond the tie).  Then ICP
-        from the reference orientation (:func:`_unturned`) is tried, and kept where it fits
-        better beyond the tie."""
+        that fit falls below ``last_fit`` (the previous step's) beyond the tie, the track may have
+        left the part's basin: a turn the surface hardly sees (a drawer front spun about its
+        normal), once in a pose, is carried on by both guesses and grows step by step
+        (cabinet_multi_1's drawer: 1 → 9.5° while it slides, where the true pose fits better
+        beyond the tie).  Then ICP from the reference orientation (:func:`_unturned`) is tried,
+        and kept where it fits better beyond the tie."""
         if last_fit is None or fit >= last_fit - fit_tie(last_fit, len(points)):
             return T, fit
         U, fit_u = self.solve_step_fit(points, s, [_unturned(solved, points)])
