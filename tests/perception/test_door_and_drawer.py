@@ -69,7 +69,8 @@ def test_the_points_make_a_helix_on_the_drawer_a_slide(tmp_path):
     (k, slide), = [(k, j) for k, j in enumerate(graph.best.joints) if j.type == "prismatic"]
     helix = graph.edges[(slide.parent, slide.child)]["helical"]
     joints = list(graph.best.joints)
-    joints[k] = dataclasses.replace(slide, hypothesis=dataclasses.replace(helix, confidence=slide.hypothesis.confidence))
+    helix = dataclasses.replace(helix, confidence=slide.hypothesis.confidence)
+    joints[k] = dataclasses.replace(slide, hypothesis=helix)
     graph = dataclasses.replace(graph, best=dataclasses.replace(graph.best, joints=tuple(joints)))
     lines = closed_form_lines(per, graph)
     built = build_model(per, graph, DEFAULT_DENSITY, "cabinet", lines, gravity=seq.gravity)
