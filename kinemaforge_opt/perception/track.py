@@ -479,17 +479,12 @@ class Tracker:
         on = self.full_tree(s).query(points, distance_upper_bound=ICP_FINE_VOXELS * self.voxel, workers=-1)[0] < np.inf
         return float(np.mean(cons.astype(bool) & on) - np.mean(viol))
 
-    def solve_step(self, points: np.ndarray, s: int, guesses: list[np.ndarray]) -> np.ndarray | None:
-        """Best verified (4, 4) world motion of (N, 3) reference points to step s, or None
-        (module doc): narrow and wide coarse ICP from each distinct guess, the fine pass from each
-        distinct coarse pose, and of the acceptable results the best :meth:`fit`; with none,
-        :meth:`redetect`."""
-        return self.solve_step_fit(points, s, guesses)[0]
-
-    def solve_step_fit(self, points: np.ndarray, s: int,
-                       guesses: list[np.ndarray]) -> tuple[np.ndarray | None, float | None]:
-        """:meth:`solve_step`'s pose and its :meth:`fit` (None with no pose), from the verdicts
-        the step made."""
+    def solve_step(self, points: np.ndarray, s: int,
+                   guesses: list[np.ndarray]) -> tuple[np.ndarray | None, float | None]:
+        """Best verified (4, 4) world motion of (N, 3) reference points to step s and its
+        :meth:`fit`, or (None, None) (module doc): narrow and wide coarse ICP from each distinct
+        guess, the fine pass from each distinct coarse pose, and of the acceptable results the
+        best :meth:`fit` (from the verdicts the step made); with none, :meth:`redetect`."""
         if self.trees[s] is None or len(self.targets[s]) < 3:
             return None, None
         apart = START_SEPARATION_VOXELS * self.voxel
@@ -529,7 +524,7 @@ class Tracker:
         and kept where it fits better beyond the tie."""
         if last_fit is None or fit >= last_fit - fit_tie(last_fit, len(points)):
             return T, fit
-        U, fit_u = self.solve_step_fit(points, s, [_unturned(solved, points)])
+        U, fit_u = self.solve_step(points, s, [_unturned(solved, points)])
         return (U, fit_u) if U is not None and fit_u > fit + fit_tie(fit_u, len(points)) else (T, fit)
 
     def redetect(self, points: np.ndarray, s: int, prediction: np.ndarray) -> np.ndarray | None:
@@ -572,7 +567,7 @@ class Tracker:
             while 0 <= s < n:
                 # constant velocity first, then the last pose
                 guesses = [_predict(solved), solved[-1]] if len(solved) >= 2 else [solved[-1]]
-                T, fit = self.solve_step_fit(sample, s, guesses)
+                T, fit = self.solve_step(sample, s, guesses)
                 if T is not None and len(solved) >= 2:
                     T, last_fit = self.unturn(sample, s, T, fit, solved, last_fit)
                 s += direction

@@ -39,13 +39,13 @@ SLIPPED = _pushed(4) + [FLIPPED] * 4
 
 
 class _Scripted(Tracker):
-    """Eight steps; solve_step_fit returns the scripted pose of each (the ICP results), each
+    """Eight steps; solve_step returns the scripted pose of each (the ICP results), each
     fitting fully; no growing."""
 
     def __init__(self, poses: list[np.ndarray]):
         self.poses, self.voxel, self.clouds = poses, VOXEL, [None] * len(poses)
 
-    def solve_step_fit(self, points, s, guesses):
+    def solve_step(self, points, s, guesses):
         return self.poses[s], 1.0
 
     def grow(self, ref, points, Ts):

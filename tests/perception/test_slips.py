@@ -118,7 +118,7 @@ class _Scripted(Tracker):
     def __init__(self, poses: list[np.ndarray], voxel: float = 0.006):
         self.clouds, self.voxel, self.poses = [None] * len(poses), voxel, poses
 
-    def solve_step_fit(self, points, s, guesses):
+    def solve_step(self, points, s, guesses):
         return (None, None) if np.isnan(self.poses[s]).any() else (self.poses[s], 1.0)
 
     def grow(self, ref, points, Ts):

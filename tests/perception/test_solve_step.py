@@ -63,7 +63,7 @@ class _Scripted(Tracker):
 def test_the_pose_on_the_surface_wins_over_one_the_images_merely_accept():
     tracker = _Scripted({False: SHORT, True: TRUE})
     assert tracker.verify(FRONT @ SHORT[:3, :3].T + SHORT[:3, 3], 1) == (1.0, 0.0)  # both verify
-    T = tracker.solve_step(FRONT, 1, [np.eye(4)])
+    T, _ = tracker.solve_step(FRONT, 1, [np.eye(4)])
     np.testing.assert_allclose(T, TRUE)
 
 
@@ -71,6 +71,6 @@ def test_coarse_poses_in_one_basin_get_one_fine_pass():
     near = TRUE @ _pose(t=(0.002, 0.0, 0.0))
     tracker = _Scripted({False: near, True: TRUE})
     # at rest the constant-velocity guess is the last pose: one start, one basin
-    T = tracker.solve_step(FRONT, 1, [_pose(t=(0.001, 0.0, 0.0)), np.eye(4)])
+    T, _ = tracker.solve_step(FRONT, 1, [_pose(t=(0.001, 0.0, 0.0)), np.eye(4)])
     assert len(tracker.fine_starts) == 1
     np.testing.assert_allclose(T, near)

@@ -43,7 +43,7 @@ def test_the_at_rest_guess_a_voxel_from_the_constant_velocity_one_is_tried_and_w
     oracle = _Oracle(face, 2)
     sideways = np.eye(4)
     sideways[0, 3] = VOXEL  # the constant-velocity guess: the last step's one-voxel slip, continued
-    T = oracle.solve_step(face, 1, [sideways, np.eye(4)])
+    T, _ = oracle.solve_step(face, 1, [sideways, np.eye(4)])
     # from the sideways guess alone ICP stays a voxel off (every point but one column sits on the grid)
     stuck = oracle._fine(face, 1, oracle._coarse(face, 1, sideways))
     assert abs(stuck[0, 3] - VOXEL) < 0.2 * VOXEL
@@ -61,9 +61,9 @@ def test_results_the_images_cannot_tell_apart_keep_the_first_guess():
     oracle = _Oracle(face, 2)
     sideways = np.eye(4)
     sideways[0, 3] = VOXEL
-    T = oracle.solve_step(points, 1, [sideways, np.eye(4)])
+    T, _ = oracle.solve_step(points, 1, [sideways, np.eye(4)])
     assert abs(T[0, 3] - VOXEL) < 0.2 * VOXEL
-    T = oracle.solve_step(points, 1, [np.eye(4), sideways])
+    T, _ = oracle.solve_step(points, 1, [np.eye(4), sideways])
     assert abs(T[0, 3]) < 0.2 * VOXEL
 
 
@@ -87,7 +87,7 @@ def test_a_track_whose_fit_drops_is_tried_from_the_reference_orientation():
     oracle = _Oracle(face, 3)
     turned = _turned_about_normal(face, 1.5)
     oracle.set_targets([np.concatenate([face, face @ turned[:3, :3].T + turned[:3, 3]])] * 3)
-    stuck = oracle.solve_step(face, 2, [turned])
+    stuck, _ = oracle.solve_step(face, 2, [turned])
     np.testing.assert_allclose(stuck, turned, atol=1e-6)
     fit_turned = oracle.fit(face @ turned[:3, :3].T + turned[:3, 3], 2)
     assert fit_turned < 0.9
