@@ -85,3 +85,35 @@ def lid_lifted_off_its_stop(dynamics: dict, noise: float = 2e-3) -> tuple:
     every = int(round(1 / (30 * arm.dt)))
     q = true.q[::every] + np.random.default_rng(0).normal(0, noise, true.q[::every].shape)
     return model, Recording(t[::every], model.joint_names, q, tau=true.tau[::every])
+
+
+def motion_about(rotvec=(0.0, 0.0, 0.0), t=(0.0, 0.0, 0.0), about=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """(4, 4) world motion: rotation ``rotvec`` [rad] about the point ``about`` [m], then translation t [m]."""
+    from scipy.spatial.transform import Rotation
+
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
+    T[:3, 3] = np.asarray(about) - T[:3, :3] @ np.asarray(about) + np.asarray(t)
+    return T
+
+
+def scripted_tracker(poses: list[np.ndarray], voxel: float):
+    """A :class:`~kinemaforge_opt.perception.track.Tracker` whose per-step solver returns the
+    scripted world motion of each step (the ICP results; a NaN pose: none verifies), each fitting
+    fully, to test :meth:`Tracker.track`'s handling of the poses alone; no growing.  ``voxel`` [m]."""
+    from kinemaforge_opt.perception.track import Tracker
+
+    class Scripted(Tracker):
+        def __init__(self):
+            self.poses, self.voxel, self.clouds = poses, voxel, [None] * len(poses)
+
+        def solve_step(self, points, s, guesses):
+            return (None, None) if np.isnan(self.poses[s]).any() else (self.poses[s], 1.0)
+
+        def grow(self, ref, points, Ts):
+            return points
+
+        def grow_far(self, ref, points, Ts):
+            return points
+
+    return Scripted()

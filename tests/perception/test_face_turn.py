@@ -8,9 +8,9 @@ pose does not continue it: the track ends at the turn.  The ICP results are scri
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from kinemaforge_opt.perception.track import ICP_COARSE_VOXELS, WIDE_FACTOR, Tracker, displacement, jump
+from factories import motion_about, scripted_tracker
+from kinemaforge_opt.perception.track import ICP_COARSE_VOXELS, WIDE_FACTOR, displacement, jump
 
 VOXEL = 0.0075  # [m] a 640x480 voxel at ~2 m
 REACH = WIDE_FACTOR * ICP_COARSE_VOXELS * VOXEL  # [m] ICP's wide reach, as the tracker uses it
@@ -20,11 +20,9 @@ CENTRE = STRIP.mean(axis=0)
 
 
 def _pose(rotvec=(0.0, 0.0, 0.0), t=(0.0, 0.0, 0.0), about=CENTRE) -> np.ndarray:
-    """(4, 4) world motion: rotation ``rotvec`` [rad] about the point ``about`` [m], then translation t [m]."""
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
-    T[:3, 3] = about - T[:3, :3] @ about + np.asarray(t)
-    return T
+    """(4, 4) world motion: rotation ``rotvec`` [rad] about the point ``about`` [m] (the strip's
+    centre unless given), then translation t [m]."""
+    return motion_about(rotvec, t, about)
 
 
 def _pushed(steps: int) -> list[np.ndarray]:
@@ -38,21 +36,8 @@ FLIPPED = _pose(rotvec=(0.0, 0.0, np.radians(70.0)), t=(0.02, 0.04, 0.0))
 SLIPPED = _pushed(4) + [FLIPPED] * 4
 
 
-class _Scripted(Tracker):
-    """Eight steps; solve_step returns the scripted pose of each (the ICP results), each
-    fitting fully; no growing."""
-
-    def __init__(self, poses: list[np.ndarray]):
-        self.poses, self.voxel, self.clouds = poses, VOXEL, [None] * len(poses)
-
-    def solve_step(self, points, s, guesses):
-        return self.poses[s], 1.0
-
-    def grow(self, ref, points, Ts):
-        return points
-
-    def grow_far(self, ref, points, Ts):
-        return points
+def _scripted(poses: list[np.ndarray]):
+    return scripted_tracker(poses, VOXEL)
 
 
 def test_the_turn_stays_within_the_wide_reach_of_the_prediction():
@@ -61,14 +46,14 @@ def test_the_turn_stays_within_the_wide_reach_of_the_prediction():
 
 
 def test_a_strip_turned_onto_another_face_ends_its_track():
-    track = _Scripted(SLIPPED).track("p0", 0, STRIP)
+    track = _scripted(SLIPPED).track("p0", 0, STRIP)
     observed = np.isfinite(track.Ts_delta[:, 0, 0])
     assert observed.tolist() == [True] * 4 + [False] * 4
     np.testing.assert_allclose(track.Ts_delta[:4], np.stack(SLIPPED[:4]))
 
 
 def test_a_strip_that_slides_on_is_tracked_throughout():
-    track = _Scripted(_pushed(8)).track("p0", 0, STRIP)
+    track = _scripted(_pushed(8)).track("p0", 0, STRIP)
     np.testing.assert_allclose(track.Ts_delta, np.stack(_pushed(8)))
 
 
@@ -78,5 +63,5 @@ def test_a_strip_turning_on_its_screw_is_kept():
     hinge = CENTRE + np.array([0.0, -0.05, 0.0])
     lid = [_pose(rotvec=(0.0, 0.0, np.radians(a)), about=hinge) for a in (0.0, 10.0, 20.0, 90.0, 90.0)]
     assert jump(lid[1:3], lid[3], lid[4], STRIP, REACH) is None
-    track = _Scripted(lid).track("p0", 0, STRIP)
+    track = _scripted(lid).track("p0", 0, STRIP)
     assert np.isfinite(track.Ts_delta[:, 0, 0]).all()

@@ -4,22 +4,15 @@ slip, a part that starts or stops moving between two samples is neither."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from kinemaforge_opt.perception.track import Proposal, Tracker, _comoving, displacement, join, jump, symmetries
+from factories import motion_about as _pose
+from factories import scripted_tracker
+from kinemaforge_opt.perception.track import Proposal, _comoving, displacement, join, jump, symmetries
 
 RNG = np.random.default_rng(0)
 # a drawer-sized box surface: 40 x 30 x 15 cm, points on its faces
 BOX = RNG.uniform([-0.2, -0.15, 0.0], [0.2, 0.15, 0.15], (600, 3))
 TOL = 0.07  # [m] the wide ICP reach of a ~6 mm voxel (3 x 4 voxels)
-
-
-def _pose(rotvec=(0.0, 0.0, 0.0), t=(0.0, 0.0, 0.0), about=np.zeros(3)) -> np.ndarray:
-    """(4, 4) world motion: rotation ``rotvec`` about the point ``about``, then translation t [m]."""
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
-    T[:3, 3] = about - T[:3, :3] @ about + np.asarray(t)
-    return T
 
 
 def _drawer(stroke_per_step: list[float]) -> list[np.ndarray]:
@@ -111,21 +104,8 @@ def test_a_lid_slammed_shut_is_no_slip():
     assert jump(lid[2:4], off, off, BOX, TOL) == "slip"
 
 
-class _Scripted(Tracker):
-    """A tracker whose per-step solver returns scripted world motions (NaN: none verifies), each
-    fitting fully, to test the slip handling of :meth:`Tracker.track` alone; no growing."""
-
-    def __init__(self, poses: list[np.ndarray], voxel: float = 0.006):
-        self.clouds, self.voxel, self.poses = [None] * len(poses), voxel, poses
-
-    def solve_step(self, points, s, guesses):
-        return (None, None) if np.isnan(self.poses[s]).any() else (self.poses[s], 1.0)
-
-    def grow(self, ref, points, Ts):
-        return points
-
-    def grow_far(self, ref, points, Ts):
-        return points
+def _scripted(poses: list[np.ndarray], voxel: float = 0.006):
+    return scripted_tracker(poses, voxel)
 
 
 def _relative(world: list[np.ndarray], ref: int) -> list[np.ndarray]:
@@ -139,7 +119,7 @@ def test_tracking_ends_a_side_at_a_slip_and_drops_a_flip():
     slipped = truth[2] @ _pose(rotvec=(0.0, 0.0, np.pi / 2), t=(0.11, -0.08, -0.26))
     script[2] = script[1] = script[0] = slipped  # the backward side slips at step 2 and stays
     script[8] = truth[8] @ _pose(rotvec=(np.pi, 0.0, 0.0))  # a half-turn flip at step 8 alone
-    Ts = _Scripted(script).track("p0", 6, BOX).Ts_delta
+    Ts = _scripted(script).track("p0", 6, BOX).Ts_delta
     assert np.isnan(Ts[[0, 1, 2, 8]]).all()
     for s in (3, 4, 5, 6, 7, 9):
         np.testing.assert_allclose(Ts[s], truth[s], atol=1e-12)
@@ -149,7 +129,7 @@ def test_tracking_keeps_a_lid_that_turns_back_at_the_reference_and_slams_shut():
     about = np.array([0.0, 0.15, 0.0])
     angles = np.radians([0.0, 20.0, 40.0, 60.0, 80.0, 55.0, 8.0, 0.0, 0.0])  # opened, then slammed
     truth = _relative([_pose(rotvec=(a, 0.0, 0.0), about=about) for a in angles], 4)
-    Ts = _Scripted(truth).track("p0", 4, BOX).Ts_delta
+    Ts = _scripted(truth).track("p0", 4, BOX).Ts_delta
     np.testing.assert_allclose(Ts, np.stack(truth), atol=1e-12)
 
 
@@ -164,7 +144,7 @@ def test_a_lid_slammed_shut_and_then_seen_turned_over_every_other_step_keeps_its
     centre = truth[5][:3, :3] @ BOX.mean(axis=0) + truth[5][:3, 3]
     for s in (6, 8, 10):
         script[s] = _pose(rotvec=(np.pi, 0.0, 0.0), about=centre) @ truth[s]
-    Ts = _Scripted(script).track("p0", 3, BOX).Ts_delta
+    Ts = _scripted(script).track("p0", 3, BOX).Ts_delta
     assert np.isnan(Ts[[6, 8, 10]]).all()
     for s in (0, 1, 2, 3, 4, 5, 7, 9, 11):
         np.testing.assert_allclose(Ts[s], truth[s], atol=1e-12)
@@ -204,5 +184,5 @@ def test_tracking_keeps_the_twin_of_a_symmetric_part_nearest_the_motion():
     truth = _relative([_pose(rotvec=(a, 0.0, 0.0), about=about) for a in angles], 3)
     flip = symmetries(lid, 1.5 * 0.006)[0]
     script = [T @ flip if s in (6, 8, 10) else T for s, T in enumerate(truth)]
-    Ts = _Scripted(script).track("p0", 3, lid).Ts_delta
+    Ts = _scripted(script).track("p0", 3, lid).Ts_delta
     np.testing.assert_allclose(Ts, np.stack(truth), atol=1e-9)
