@@ -274,7 +274,10 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
     radius = ICP_FINE_VOXELS * voxel
     mid = times.size // 2
     band = environment_band(clouds[mid], noise, radius, averaged=static)
-    env = environment_planes(clouds[mid].points[status[mid] == STATIC], clouds[mid].points, band)
+    # a static camera's static reading is a mean over up to one reading per step (static_depth)
+    noise_band = TEST_SIGMAS * noise.sigma(camera_range(clouds[mid])) / np.sqrt(times.size if static else 1)
+    env = environment_planes(clouds[mid].points[status[mid] == STATIC], clouds[mid].points, band,
+                             noise_band=noise_band)
     t0 = stage("environment", t0, tick=False)
     tracker = Tracker(clouds, status, seq.cameras, noise, voxel, tuple(env), band)
     proposals = _trackable(propose_and_track(tracker), times, voxel)

@@ -67,3 +67,40 @@ def test_a_floor_read_once_by_a_moving_camera_is_found_within_its_noise_band():
         (p,) = [p for p in planes if p.normal @ true_normal > 0.99]  # pointing to the scene side
         assert np.degrees(np.arccos(min(1.0, p.normal @ true_normal))) < 1.5
         assert abs(abs(p.offset) - true_offset) < 0.01
+
+
+def _wide_room(rng, noise, steps):
+    """A static camera 2 m in front of a fridge-sized box standing on a floor, before a back wall
+    8 m wide 0.94 m behind the box's centre; every point read ``steps`` times and averaged, so
+    moved along its line of sight by σ_z(range)/√steps.  Returns (camera, static points, scene)."""
+    camera = np.array([0.0, -2.4, 1.5])
+    floor = np.c_[rng.uniform(-4.0, 4.0, 6000), rng.uniform(-1.5, 0.94, 6000), np.zeros(6000)]
+    wall = np.c_[rng.uniform(-4.0, 4.0, 4000), np.full(4000, 0.94), rng.uniform(0.0, 2.4, 4000)]
+    box = rng.uniform([-0.35, -0.3, 0.0], [0.35, 0.3, 1.8], (3000, 3))
+
+    def averaged(points):
+        ray = points - camera
+        r = np.linalg.norm(ray, axis=1)
+        return camera + ray * ((r + noise.sigma(r) / np.sqrt(steps) * rng.normal(size=r.size)) / r)[:, None]
+
+    static = averaged(np.vstack([floor, wall]))
+    return camera, static, np.vstack([static, averaged(box)])
+
+
+def test_a_far_wall_is_background_within_its_own_depth_noise():
+    """At 3–5 m a D435-like σ_z (k = 0.003/m) averaged over 10 steps is 1.1–2.4 cm: the wall's
+    far readings scatter beyond a 2-cm threshold, and more than 1 % of the scene lies 'behind'
+    it.  Judged against each point's own noise band (3σ_z/√10 at its range) it is background,
+    found where it is; a board in front of it, with the wall 60 cm behind, is not."""
+    rng = np.random.default_rng(1)
+    noise = DepthNoise(k=0.003, quantum=0.001)
+    camera, static, scene = _wide_room(rng, noise, steps=10)
+    band = 3.0 * noise.sigma(np.linalg.norm(scene - camera, axis=1)) / np.sqrt(10)
+    assert not any(p.normal[1] < -0.99 for p in environment_planes(static, scene, 0.02))  # refused
+    planes = environment_planes(static, scene, 0.02, noise_band=band)
+    (wall,) = [p for p in planes if p.normal[1] < -0.99]  # pointing to the scene side
+    assert abs(wall.offset - 0.94) < 0.01
+    board = np.c_[rng.uniform(-2.0, 2.0, 4000), np.full(4000, 0.34), rng.uniform(0.0, 2.4, 4000)]
+    with_board = np.vstack([scene, board])
+    board_band = np.r_[band, np.full(len(board), band.min())]
+    assert not any(abs(p.offset - 0.34) < 0.05 for p in environment_planes(board, with_board, 0.02, noise_band=board_band))
