@@ -125,7 +125,7 @@ def _trackable(proposals: list[Proposal], times: np.ndarray, voxel: float) -> li
 
     The jitter is the spread about a local quadratic over NOISE_WINDOW samples, which assumes the
     motion smooth at the sampling rate.  At 2 frames a second it is not: a fridge door resting
-    for six samples and then swung 13° → 57° → 80° (protocol_refrigerator_1@s14 at 12 frames)
+    for six samples and then swung 13° → 57° → 80° (protocol_refrigerator_1@s14,v4,f12)
     has a 35-mm jitter on a track that follows the door to a few millimetres, and the door was
     lost.  A track that jumps between surfaces is on no screw either."""
     need = min(MIN_SAMPLES, times.size)
