@@ -67,7 +67,9 @@ class FrameCloud:
     column) indices in the full-resolution image.  points_world: (N, 3) [m].  depth: (h, w)
     z-depth [m] of the decimated image, NaN = no reading (kept for free-space tests).
     camera: the intrinsics of ``depth`` (the frame's camera decimated by ``stride``).
-    status: (N,) STATIC/UNKNOWN/MOVING of each kept pixel (see :mod:`change`), or None."""
+    status: (N,) STATIC/UNKNOWN/MOVING of each kept pixel (see :mod:`change`), or None.
+    readings: (N,) how many readings of its pixel each point's depth is the mean of (a static
+    camera's static pixels: :func:`~.perceive.static_depth`), or None: one each."""
 
     frame: Frame
     pixels: np.ndarray
@@ -76,6 +78,7 @@ class FrameCloud:
     camera: CameraInfo | None = None
     stride: int = 1
     status: np.ndarray | None = None
+    readings: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,12 +86,16 @@ class TimeCloud:
     """All views at one time, fused.  t: time [s].  views: the per-image clouds.
     points: (M, 3) voxel-downsampled, outlier-filtered world points [m].  sightlines: (M, 3) unit
     vectors from each point towards the cameras that saw it (the mean over the readings fused
-    into it); a seen surface faces them (:func:`~kinemaforge_opt.nlp.visual.correspond`)."""
+    into it); a seen surface faces them (:func:`~kinemaforge_opt.nlp.visual.correspond`).
+    variance_share: (M,) each point's depth variance as a share of one reading's, the mean over
+    the points fused into it of 1/n (n: the readings each averages, ``FrameCloud.readings``);
+    None: 1 (single readings)."""
 
     t: float
     views: tuple[FrameCloud, ...]
     points: np.ndarray
     sightlines: np.ndarray
+    variance_share: np.ndarray | None = None
 
     @cached_property
     def tree(self) -> cKDTree:
@@ -246,13 +253,14 @@ def fuse(t: float, views: list[FrameCloud], voxel: float, coarse: float | None =
     from .change import MOVING, STATIC, UNKNOWN
 
     def rows(v: FrameCloud, keep: np.ndarray | slice = slice(None)) -> np.ndarray:
-        """(N, 6) positions and unit sightlines of a view's kept points side by side, so that
-        fusion averages both over each voxel."""
+        """(N, 7) positions, unit sightlines and depth variance shares (1/readings) of a view's
+        kept points side by side, so that fusion averages them over each voxel."""
         x = v.points_world[keep]
-        return np.hstack([x, _unit_rows(v.frame.T_world_camera[:3, 3] - x)])
+        share = np.ones(len(x)) if v.readings is None else 1.0 / v.readings[keep]
+        return np.hstack([x, _unit_rows(v.frame.T_world_camera[:3, 3] - x), share[:, None]])
 
     if any(v.status is None for v in views):
-        fused = downsample(np.concatenate([rows(v) for v in views]) if views else np.zeros((0, 6)), voxel, outliers=True)
+        fused = downsample(np.concatenate([rows(v) for v in views]) if views else np.zeros((0, 7)), voxel, outliers=True)
         return _time_cloud(t, views, fused), np.full(len(fused), UNKNOWN, dtype=np.int8)
     keeps = [slice(None)] * len(views)
     if coarse is not None and coarse >= 2 * voxel:
@@ -261,7 +269,7 @@ def fuse(t: float, views: list[FrameCloud], voxel: float, coarse: float | None =
         k = int(coarse / voxel)
         keeps = [(v.status != STATIC) | (((v.pixels[:, 0] // v.stride) % k == 0) & ((v.pixels[:, 1] // v.stride) % k == 0))
                  for v in views]
-    pts = np.concatenate([rows(v, keep) for v, keep in zip(views, keeps)]) if views else np.zeros((0, 6))
+    pts = np.concatenate([rows(v, keep) for v, keep in zip(views, keeps)]) if views else np.zeros((0, 7))
     st = np.concatenate([v.status[keep] for v, keep in zip(views, keeps)]) if views else np.zeros(0, dtype=np.int8)
     parts, status = [], []
     for code, size, outl in ((MOVING, voxel, True), (UNKNOWN, voxel, True), (STATIC, coarse or voxel, False)):
@@ -278,5 +286,5 @@ def _unit_rows(v: np.ndarray) -> np.ndarray:
 
 
 def _time_cloud(t: float, views, fused: np.ndarray) -> TimeCloud:
-    """The TimeCloud of fused (M, 6) positions and mean sightlines."""
-    return TimeCloud(t, tuple(views), fused[:, :3], _unit_rows(fused[:, 3:]))
+    """The TimeCloud of fused (M, 7) positions, mean sightlines and mean variance shares."""
+    return TimeCloud(t, tuple(views), fused[:, :3], _unit_rows(fused[:, 3:6]), fused[:, 6])

@@ -147,9 +147,9 @@ def static_cameras(seq: Sequence, times: np.ndarray) -> bool:
     return True
 
 
-def static_depth(stack: np.ndarray, status: np.ndarray) -> np.ndarray:
+def static_depth(stack: np.ndarray, status: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(h, w) per-pixel mean [m] of the STATIC readings of a (T, h, w) depth stack [m] with its
-    (T, h, w) status (NaN where a pixel has none).
+    (T, h, w) status (NaN where a pixel has none), and (h, w) how many readings each mean holds.
 
     A static reading of a static camera sees the same surface point at every step where it is
     static, so its temporal mean has σ_z/√n noise: on a 3 m back wall (σ_z ≈ 3 cm at k = 0.003/m)
@@ -158,7 +158,7 @@ def static_depth(stack: np.ndarray, status: np.ndarray) -> np.ndarray:
     n = ok.sum(axis=0)
     total = np.where(ok, stack, 0.0).sum(axis=0, dtype=np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(n > 0, total / np.maximum(n, 1), np.nan)
+        return np.where(n > 0, total / np.maximum(n, 1), np.nan), n
 
 
 def _pixel_status_views(seq: Sequence, times: np.ndarray, views: list[list[FrameCloud]], noise: DepthNoise) -> list[list[FrameCloud]]:
@@ -189,20 +189,21 @@ def _camera_status(views: list[FrameCloud], noise: DepthNoise) -> list[FrameClou
         stack.append(d)
     stack = np.stack(stack)
     st = pixel_status(stack, noise)
-    mean = static_depth(stack, st)
+    mean, count = static_depth(stack, st)
     out = []
     for v, s_img in zip(views, st):
         r, c = v.pixels[:, 0] // v.stride, v.pixels[:, 1] // v.stride
         status = s_img[r, c]
         pts = v.points_world.copy()
         still = status == STATIC
+        readings = np.where(still, np.maximum(count[r, c], 1), 1)
         if still.any():
             K = v.camera  # the decimated intrinsics (frame_cloud sets them)
             z = mean[r[still], c[still]]
             rays = np.stack([(c[still] - K.cx) / K.fx, (r[still] - K.cy) / K.fy, np.ones(z.size)], axis=1)
             T = v.frame.T_world_camera
             pts[still] = (rays * z[:, None]) @ T[:3, :3].T + T[:3, 3]
-        out.append(dataclasses.replace(v, status=status, points_world=pts))
+        out.append(dataclasses.replace(v, status=status, points_world=pts, readings=readings))
     return out
 
 
@@ -274,8 +275,9 @@ def _perceive(seq: Sequence, progress: tqdm | None) -> Perception:
     radius = ICP_FINE_VOXELS * voxel
     mid = times.size // 2
     band = environment_band(clouds[mid], noise, radius, averaged=static)
-    # a static camera's static reading is a mean over up to one reading per step (static_depth)
-    noise_band = TEST_SIGMAS * noise.sigma(camera_range(clouds[mid])) / np.sqrt(times.size if static else 1)
+    # each point's depth noise: a static camera's static reading is a mean (static_depth)
+    share = clouds[mid].variance_share
+    noise_band = TEST_SIGMAS * noise.sigma(camera_range(clouds[mid])) * np.sqrt(1.0 if share is None else share)
     env = environment_planes(clouds[mid].points[status[mid] == STATIC], clouds[mid].points, band,
                              noise_band=noise_band)
     t0 = stage("environment", t0, tick=False)

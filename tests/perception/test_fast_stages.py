@@ -79,6 +79,25 @@ def test_fused_points_carry_their_sightlines():
     assert both.sum() > 50 and angle[clear].max() < 0.5
 
 
+def test_fused_points_carry_the_variance_share_of_their_readings():
+    """Two static cameras over one floor: camera 0's depths are means of 12 readings, camera 1's
+    of 3 on the half x > 0 (hidden at 9 steps) and single readings on the other.  A fused
+    point's variance share is the mean of 1/readings over what was fused into it; a view without
+    counts (a moving camera) fuses as single readings."""
+    g = np.arange(-0.5, 0.5, 0.01)
+    floor = np.column_stack([np.repeat(g, g.size), np.tile(g, g.size), np.zeros(g.size**2)])
+    counts = [np.full(len(floor), 12), np.where(floor[:, 0] > 0, 3, 1)]
+    views = [FrameCloud(Frame(i, 0.0, f"cam{i}", np.eye(4), "", ""), np.zeros((len(floor), 2), int), floor,
+                        np.zeros((1, 1)), status=np.full(len(floor), STATIC, dtype=np.int8), readings=n)
+             for i, n in enumerate(counts)]
+    cloud, _ = fuse(0.0, views, 0.02)
+    inner = np.abs(cloud.points[:, 0]) > 0.02  # voxels off the line x = 0 hold one kind of reading
+    expect = np.where(cloud.points[:, 0] > 0, (1 / 12 + 1 / 3) / 2, (1 / 12 + 1) / 2)
+    np.testing.assert_allclose(cloud.variance_share[inner], expect[inner], rtol=1e-9)
+    once, _ = fuse(0.0, [FrameCloud(views[0].frame, views[0].pixels, floor, np.zeros((1, 1)))], 0.02)
+    np.testing.assert_allclose(once.variance_share, 1.0)
+
+
 def test_kabsch_and_icp_recover_a_rigid_motion():
     rng = np.random.default_rng(1)
     # an L-shaped bracket (two perpendicular plates): every motion is observable

@@ -12,7 +12,7 @@ from kinemaforge_opt.perception.change import STATIC, UNKNOWN
 from kinemaforge_opt.perception.perceive import static_depth
 
 
-def test_static_depth_is_the_mean_of_the_static_readings():
+def test_static_depth_is_the_mean_of_the_static_readings_and_counts_them():
     rng = np.random.default_rng(0)
     T, h, w = 12, 5, 7
     truth = rng.uniform(1.0, 3.0, (h, w))
@@ -22,12 +22,13 @@ def test_static_depth_is_the_mean_of_the_static_readings():
     D[:4, 0, 0] = 0.5  # (what it saw before does not count)
     status[:, 1, 1] = UNKNOWN  # never static
     D[5, 2, 2] = np.nan  # a dropout
-    mean = static_depth(D.astype(np.float32), status)
+    mean, count = static_depth(D.astype(np.float32), status)
     with warnings.catch_warnings():  # the never-static pixel's mean is NaN on purpose
         warnings.simplefilter("ignore", RuntimeWarning)
         want = np.nanmean(np.where(status == STATIC, D, np.nan), axis=0)
     assert np.isnan(mean[1, 1]) and np.isnan(want[1, 1])
     np.testing.assert_allclose(mean[np.isfinite(want)], want[np.isfinite(want)], atol=1e-6)
+    assert (count[0, 0], count[1, 1], count[2, 2], count[3, 3]) == (T - 4, 0, T - 1, T)
     # the temporal mean is √T times less noisy than one reading
     err = np.abs(mean - truth)[np.isfinite(want)]
     assert np.sqrt(np.mean(err**2)) < 0.02 / np.sqrt(T) * 1.5
