@@ -45,7 +45,7 @@ sysdeps:
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip "setuptools>=68" wheel
+	$(PY) -m pip install -q --upgrade pip "setuptools>=77" wheel
 
 # The native bridge compiles against the exact casadi/libpinocchio installed in .venv
 # (no build isolation), so build and runtime versions are the same files.
