@@ -56,7 +56,11 @@ slammed shut; checked first) or when the next pose continues from it (a part tha
 two samples changes its velocity once); otherwise tracking went on from a wrong pose and the
 track ends there in that direction (the jumped pose and the next are unobserved; a jump at the
 last solved step alone).  The part's moving points at the lost steps seed a new proposal, which
-joins it where it moves with it (:func:`join`).
+joins it where it moves with it (:func:`join`).  The first of the two sides tracked from the
+reference starts from rest, as nothing yet shows a velocity; its first step is judged by the
+increment through the reference that the other side shows, and where it is a slip there (a
+drawer still being pulled at the reference, beyond ICP's reach from rest) that side is tracked
+again with the constant-velocity guess from that increment.
 
 Growing: a moving part's points near a hinge move less than the free-space test can resolve
 (τ ≈ 3√2 σ_z), so the moving cluster misses a strip along the axis; a drawer's inside is never
@@ -557,40 +561,11 @@ class Tracker:
         twins = [np.eye(4)] + symmetries(sample, ICP_FINE_VOXELS * self.voxel)
         sides: list[tuple[list[np.ndarray], list[int]]] = []
         for direction in (1, -1):
-            solved, steps = [np.eye(4)], [ref]
             # one trajectory runs through the reference: the first pose of the side tracked
             # before gives the increment before this side's first step (the first side's first
             # step is judged once the second side is tracked)
             lead = [sides[0][0][1]] if sides and len(sides[0][0]) > 1 else []
-            s = ref + direction
-            last_fit = None
-            while 0 <= s < n:
-                # constant velocity first, then the last pose
-                guesses = [_predict(solved), solved[-1]] if len(solved) >= 2 else [solved[-1]]
-                T, fit = self.solve_step(sample, s, guesses)
-                if T is not None and len(solved) >= 2:
-                    T, last_fit = self.unturn(sample, s, T, fit, solved, last_fit)
-                s += direction
-                if T is None:
-                    continue
-                T = min((T @ S for S in twins), key=lambda X: min(displacement(X, g, sample) for g in guesses))
-                Ts[s - direction] = T
-                solved.append(T)
-                steps.append(s - direction)
-                if len(solved) < 3 or (len(solved) == 3 and not sides):
-                    continue
-                kind = jump((lead + solved)[-4:-2], solved[-2], T, sample, reach, normals)
-                if kind == "outlier":  # the jumped pose alone
-                    Ts[steps[-2]] = np.nan
-                    del solved[-2], steps[-2]
-                elif kind == "slip":  # the jumped pose and the one built on it; the side ends here
-                    Ts[steps[-2]] = Ts[steps[-1]] = np.nan
-                    del solved[-2:], steps[-2:]
-                    break
-            if len(solved) >= (2 if sides else 3) and \
-                    jump((lead + solved)[-3:-1], solved[-1], None, sample, reach, normals) == "slip":
-                Ts[steps[-1]] = np.nan  # a jump at the last solved step, on no screw of the track
-            sides.append((solved, steps))
+            sides.append(self._track_side(sample, ref, direction, lead, not sides, False, Ts, reach, normals, twins))
         (solved, steps), other = sides[0], sides[1][0]
         if len(solved) >= 2:  # the first side's first step, after the increment on the other side
             kind = jump(other[1:2][::-1] + [np.eye(4)], solved[1], solved[2] if len(solved) > 2 else None, sample, reach,
@@ -598,9 +573,56 @@ class Tracker:
             if kind == "outlier":
                 Ts[steps[1]] = np.nan
             elif kind == "slip":
-                Ts[steps[1]:] = np.nan
+                # the part moved on through the reference at the velocity the other side shows
+                # (a drawer still being pulled), which the first side, tracked from rest, missed:
+                # tracked again from that velocity
+                Ts[ref + 1:] = np.nan
+                if len(other) > 1:
+                    self._track_side(sample, ref, 1, other[1:2], False, True, Ts, reach, normals, twins)
         grown = self.grow(ref, points, Ts)
         return Proposal(name, ref, self.grow_far(ref, grown, Ts), Ts)
+
+    def _track_side(self, sample: np.ndarray, ref: int, direction: int, lead: list[np.ndarray], first: bool,
+                    carry: bool, Ts: np.ndarray, reach: float, normals: np.ndarray,
+                    twins: list[np.ndarray]) -> tuple[list[np.ndarray], list[int]]:
+        """Track (N, 3) ``sample`` from step ``ref`` one step at a time in ``direction`` (±1),
+        writing the (4, 4) poses into ``Ts`` (T, 4, 4) and unobserving jumps (module doc); returns
+        the solved poses and their steps.  lead: the other side's first pose, if tracked (its
+        increment through the reference judges this side's first step, unless ``first``; with
+        ``carry`` it also gives the first step a constant-velocity guess).  reach: the jump
+        tolerance [m]; normals: the sample's surface normals; twins: its symmetries."""
+        n = len(self.clouds)
+        solved, steps = [np.eye(4)], [ref]
+        s = ref + direction
+        last_fit = None
+        while 0 <= s < n:
+            # constant velocity first, then the last pose
+            history = lead + solved if carry else solved
+            guesses = [_predict(history), solved[-1]] if len(history) >= 2 else [solved[-1]]
+            T, fit = self.solve_step(sample, s, guesses)
+            if T is not None and len(solved) >= 2:
+                T, last_fit = self.unturn(sample, s, T, fit, solved, last_fit)
+            s += direction
+            if T is None:
+                continue
+            T = min((T @ S for S in twins), key=lambda X: min(displacement(X, g, sample) for g in guesses))
+            Ts[s - direction] = T
+            solved.append(T)
+            steps.append(s - direction)
+            if len(solved) < 3 or (len(solved) == 3 and first):
+                continue
+            kind = jump((lead + solved)[-4:-2], solved[-2], T, sample, reach, normals)
+            if kind == "outlier":  # the jumped pose alone
+                Ts[steps[-2]] = np.nan
+                del solved[-2], steps[-2]
+            elif kind == "slip":  # the jumped pose and the one built on it; the side ends here
+                Ts[steps[-2]] = Ts[steps[-1]] = np.nan
+                del solved[-2:], steps[-2:]
+                break
+        if len(solved) >= (3 if first else 2) and \
+                jump((lead + solved)[-3:-1], solved[-1], None, sample, reach, normals) == "slip":
+            Ts[steps[-1]] = np.nan  # a jump at the last solved step, on no screw of the track
+        return solved, steps
 
     def grow_far(self, ref: int, points: np.ndarray, Ts: np.ndarray) -> np.ndarray:
         """(N', 3) ``points`` [m, at ``ref``] plus what :meth:`grow` adds at the observed step

@@ -186,3 +186,26 @@ def test_tracking_keeps_the_twin_of_a_symmetric_part_nearest_the_motion():
     script = [T @ flip if s in (6, 8, 10) else T for s, T in enumerate(truth)]
     Ts = _scripted(script).track("p0", 3, lid).Ts_delta
     np.testing.assert_allclose(Ts, np.stack(truth), atol=1e-9)
+
+
+def test_a_part_still_moving_at_the_reference_is_tracked_on_from_the_other_sides_velocity():
+    """A drawer pulled 3 cm per step up to its reference step 4, then 5 cm per step, stopped at
+    step 8.  ICP reaches 4 cm from a guess: from rest the first forward step lands elsewhere (a
+    pose on another surface, where tracking would go on), which the backward side's increment
+    exposes as a slip.  The forward side is then tracked from the velocity through the reference:
+    every step is the true pose (before, steps 5-11 were all unobserved)."""
+    world = _drawer([0.03] * 4 + [0.05] * 4 + [0.0] * 3)  # steps 0-11
+    truth = _relative(world, 4)
+    elsewhere = _pose(rotvec=(0.0, 0.0, np.pi / 2), t=(0.3, 0.2, 0.0))  # a static surface far off
+    reach = 0.04
+
+    class Basin(type(_scripted(truth))):
+        def solve_step(self, points, s, guesses):
+            if any(displacement(g, truth[s], points) <= reach for g in guesses):
+                return truth[s], 1.0
+            return elsewhere, 1.0
+
+    tracker = Basin.__new__(Basin)
+    tracker.poses, tracker.voxel, tracker.clouds = truth, 0.006, [None] * len(truth)
+    Ts = tracker.track("p0", 4, BOX).Ts_delta
+    np.testing.assert_allclose(Ts, np.stack(truth), atol=1e-12)
