@@ -128,7 +128,8 @@ motion that puts both point sets on observed surfaces better (:func:`union_fit`)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from itertools import count
 
 import numpy as np
 from scipy.linalg import expm, logm
@@ -753,10 +754,12 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
     points: closer leftovers are the part's own fringe, seen through a small track error) are
     clustered into new proposals of at least ``tracker.min_points`` points, and each is tracked
     through the sequence; a proposal seeded on two touching parts is dropped once better tracks
-    cover it (:func:`without_unions`); then every track is refined (:func:`refine`)."""
+    cover it, and the tracks joined into it return as proposals of their own
+    (:func:`without_unions`); then every track is refined (:func:`refine`)."""
     order = seed_order(tracker)
     proposals: list[Proposal] = []
     seeds: dict[str, tuple[int, np.ndarray]] = {}  # a proposal's reference step and seed points
+    joined: dict[str, list[tuple[Proposal, np.ndarray]]] = {}  # the tracks joined into each, with their seeds
     radius = ICP_COARSE_VOXELS * tracker.voxel
     for r in order:
         moving = tracker.clouds[r].points[tracker.status[r] == MOVING]
@@ -778,8 +781,9 @@ def propose_and_track(tracker: Tracker) -> list[Proposal]:
                 seeds[new.name] = (int(r), rest[idx])
             else:  # a disconnected piece of a tracked part (a drawer's floor behind its front), or
                 # the part itself where its track was cut (a slip)
+                joined.setdefault(proposals[k].name, []).append((new, rest[idx]))
                 proposals[k] = join(proposals[k], new, a)
-    proposals = without_unions(tracker, proposals, seeds)
+    proposals = without_unions(tracker, proposals, seeds, joined)
     return merge_fragments(tracker, refine(tracker, proposals)) if proposals else proposals
 
 
@@ -788,7 +792,8 @@ def observed_steps(p: Proposal) -> int:
     return int(np.isfinite(p.Ts_delta[:, 0, 0]).sum())
 
 
-def without_unions(tracker: Tracker, proposals: list[Proposal], seeds: dict[str, tuple[int, np.ndarray]]) -> list[Proposal]:
+def without_unions(tracker: Tracker, proposals: list[Proposal], seeds: dict[str, tuple[int, np.ndarray]],
+                   joined: dict[str, list[tuple[Proposal, np.ndarray]]] | None = None) -> list[Proposal]:
     """The proposals (in the order they were seeded) less each whose seed later ones cover.
 
     Two parts that touch while both move (a drawer pulled out above a door still swinging back)
@@ -798,20 +803,37 @@ def without_unions(tracker: Tracker, proposals: list[Proposal], seeds: dict[str,
     seed proposals of their own, later.  When proposals seeded after it and tracked at no fewer
     steps cover COMOVING_SHARE of its seed points (within the fine ICP radius of their moved
     points at the seed's step), its parts are tracked already and it is dropped.  ``seeds``:
-    proposal name -> (reference step, (N, 3) seed points)."""
+    proposal name -> (reference step, (N, 3) seed points).
+
+    A track joined into a dropped union (``joined``: proposal name -> [(joined track, its (M, 3)
+    seed points at its reference step)]; :func:`join`, where the union followed that part for a
+    while) is a part tracked from its own seed: it returns as a proposal of its own, under a new
+    name, unless the kept proposals cover its seed in the same way (protocol_drawer_1@s8's
+    drawer, tracked at every step from its own seed, was joined into a union that followed it
+    and two other drawers, and went with it)."""
     fine = ICP_FINE_VOXELS * tracker.voxel
-    out = list(proposals)
+
+    def covered(seed: np.ndarray, ref: int, steps: int, by: list[Proposal]) -> bool:
+        hit = np.zeros(len(seed), dtype=bool)
+        for q in by:
+            moved = q.points_at(ref) if observed_steps(q) >= steps else None
+            if moved is not None:
+                hit |= cKDTree(moved).query(seed, distance_upper_bound=fine, workers=-1)[0] < np.inf
+        return bool(hit.mean() >= COMOVING_SHARE)
+
+    out, dropped = list(proposals), []
     for k, p in enumerate(proposals):
         ref, seed = seeds[p.name]
-        covered = np.zeros(len(seed), dtype=bool)
-        for q in proposals[k + 1:]:
-            moved = q.points_at(ref) if observed_steps(q) >= observed_steps(p) else None
-            if moved is not None:
-                covered |= cKDTree(moved).query(seed, distance_upper_bound=fine, workers=-1)[0] < np.inf
-        if covered.mean() >= COMOVING_SHARE:
+        if covered(seed, ref, observed_steps(p), proposals[k + 1:]):
             out = [x for x in out if x is not p]
+            dropped.append(p)
+    names = {p.name for p in proposals} | {q.name for pieces in (joined or {}).values() for q, _ in pieces}
+    fresh = (f"p{i}" for i in count() if f"p{i}" not in names)
+    for p in dropped:
+        for piece, seed in (joined or {}).get(p.name, []):
+            if not covered(seed, piece.ref, observed_steps(piece), out):
+                out.append(replace(piece, name=next(fresh)))
     return out
-
 
 def _common_anchor(p: Proposal, q: Proposal) -> tuple[np.ndarray, int | None]:
     """(steps both observe, the one nearest ``p``'s reference or None when there is none)."""
