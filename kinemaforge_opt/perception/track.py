@@ -805,12 +805,15 @@ def without_unions(tracker: Tracker, proposals: list[Proposal], seeds: dict[str,
     points at the seed's step), its parts are tracked already and it is dropped.  ``seeds``:
     proposal name -> (reference step, (N, 3) seed points).
 
-    A track joined into a dropped union (``joined``: proposal name -> [(joined track, its (M, 3)
-    seed points at its reference step)]; :func:`join`, where the union followed that part for a
-    while) is a part tracked from its own seed: it returns as a proposal of its own, under a new
-    name, unless the kept proposals cover its seed in the same way (protocol_drawer_1@s8's
-    drawer, tracked at every step from its own seed, was joined into a union that followed it
-    and two other drawers, and went with it)."""
+    A track seeded at another step and joined into a dropped union (``joined``: proposal name ->
+    [(joined track, its (M, 3) seed points at its reference step)]; :func:`join`, where the
+    union's track went on to follow that part) is a part tracked from its own seed: it returns as
+    a proposal of its own, under a new name, unless the kept proposals cover its seed in the same
+    way (protocol_drawer_1@s8's first drawer, tracked at every step from its own seed at step 4,
+    was joined into a union seeded at step 16 on the two other drawers, and went with it).  A
+    piece seeded at the union's own step is a leftover of the parts its seed spans, which the
+    kept proposals track: it does not return (a drawer's side wall sliding along it would come
+    back as a joint of its own, docs/NOTES.md)."""
     fine = ICP_FINE_VOXELS * tracker.voxel
 
     def covered(seed: np.ndarray, ref: int, steps: int, by: list[Proposal]) -> bool:
@@ -831,7 +834,7 @@ def without_unions(tracker: Tracker, proposals: list[Proposal], seeds: dict[str,
     fresh = (f"p{i}" for i in count() if f"p{i}" not in names)
     for p in dropped:
         for piece, seed in (joined or {}).get(p.name, []):
-            if not covered(seed, piece.ref, observed_steps(piece), out):
+            if piece.ref != p.ref and not covered(seed, piece.ref, observed_steps(piece), out):
                 out.append(replace(piece, name=next(fresh)))
     return out
 

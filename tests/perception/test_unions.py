@@ -61,14 +61,16 @@ def test_a_track_joined_into_a_dropped_union_returns_on_its_own():
     """A union seeded on a door and a drawer is joined by a third part's own track (where the
     union's track went on to follow that part); the door's and the drawer's later tracks cover the
     union's seed, so it is dropped — and the joined part returns as a proposal of its own, under a
-    new name.  A joined piece the kept proposals cover (a duplicate of the drawer) does not."""
+    new name.  A joined piece the kept proposals cover (a duplicate of the drawer) does not, nor
+    one seeded at the union's own step (a leftover of the parts its seed spans)."""
     third = _slab((0.0, -0.2, 1.1), (0.5, 0.0, 1.1))
     union = np.concatenate([DOOR, DRAWER])
     props = [_proposal("p0", union, 6, ALL), _proposal("p1", DOOR, 1, ALL), _proposal("p2", DRAWER, 2, ALL)]
     seeds = {"p0": (6, union), "p1": (1, DOOR), "p2": (2, DRAWER)}
     own = _proposal("p1", third, 0, ALL)  # named when seeded, before the door took the name
     duplicate = _proposal("p2", DRAWER, 3, ALL)
-    joined = {"p0": [(own, third), (duplicate, DRAWER)]}
+    leftover = _proposal("p1", third + 0.3, 6, ALL)  # seeded with the union, elsewhere
+    joined = {"p0": [(own, third), (duplicate, DRAWER), (leftover, leftover.points)]}
     out = without_unions(TRACKER, props, seeds, joined)
     assert [p.name for p in out] == ["p1", "p2", "p3"]
     np.testing.assert_array_equal(out[2].points, third)
