@@ -838,6 +838,7 @@ def without_unions(tracker: Tracker, proposals: list[Proposal], seeds: dict[str,
                 out.append(replace(piece, name=next(fresh)))
     return out
 
+
 def _common_anchor(p: Proposal, q: Proposal) -> tuple[np.ndarray, int | None]:
     """(steps both observe, the one nearest ``p``'s reference or None when there is none)."""
     common = np.flatnonzero(np.isfinite(p.Ts_delta[:, 0, 0]) & np.isfinite(q.Ts_delta[:, 0, 0]))
