@@ -830,7 +830,7 @@ def without_unions(tracker: Tracker, proposals: list[Proposal], seeds: dict[str,
         if covered(seed, ref, observed_steps(p), proposals[k + 1:]):
             out = [x for x in out if x is not p]
             dropped.append(p)
-    names = {p.name for p in proposals} | {q.name for pieces in (joined or {}).values() for q, _ in pieces}
+    names = {p.name for p in proposals}
     fresh = (f"p{i}" for i in count() if f"p{i}" not in names)
     for p in dropped:
         for piece, seed in (joined or {}).get(p.name, []):
