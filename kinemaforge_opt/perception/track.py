@@ -99,13 +99,16 @@ second drawer moving at other times puts the points in the air in front of the b
 through) and is no explanation — or inside the body, where nothing contradicts them but no
 surface holds them either: so the other motion must also put the points on observed surfaces,
 at the steps its track holds, within 1 − COMOVING_SHARE as often as the proposal's own motion
-does (:func:`fit_along`).  Both comparisons count the surface, not the free-space test alone:
-its tolerance grows with the range to centimetres, so a drawer's floor carried by the drawer
-above it into the open just over the ground is "confirmed" by the ground, while carried by its
-own drawer it is hidden under the one above (protocol_drawer_0 gave the lower drawer's floor to
-the upper drawer, part IoU 0.79; on a three-drawer chest a piece of the lower drawer that no
-motion puts on a surface as its own does joined the middle one, which a duplicate track of the
-middle drawer then explained).
+does (:func:`fit_along`).  A surface that a larger proposal holds at a step counts for neither
+motion: a fragment whose track was re-detected onto the fronts of drawers at rest while its own
+drawer was shut (its true place hidden in the body) lies on surfaces then, but on theirs (a
+three-drawer chest, 4 views, 30 frames, seed 24: the fragment became a fourth drawer).  Both
+comparisons count the surface, not the free-space test alone: its tolerance grows with the range
+to centimetres, so a drawer's floor carried by the drawer above it into the open just over the
+ground is "confirmed" by the ground, while carried by its own drawer it is hidden under the one
+above (protocol_drawer_0 gave the lower drawer's floor to the upper drawer, part IoU 0.79; on a
+three-drawer chest a piece of the lower drawer that no motion puts on a surface as its own does
+joined the middle one, which a duplicate track of the middle drawer then explained).
 
 The base is such a body too: a proposal whose points the images never contradict left in place,
 and confirm there as often as its own motion does where that motion moves them, is a piece of
@@ -128,6 +131,7 @@ motion that puts both point sets on observed surfaces better (:func:`union_fit`)
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from itertools import count
 
@@ -475,13 +479,17 @@ class Tracker:
         seen = self.verdicts(points @ T0[:3, :3].T + T0[:3, 3], s)[0] > 0
         return points[seen] if seen.sum() >= MIN_VISIBLE_SHARE * len(points) else points
 
-    def fit(self, points: np.ndarray, s: int, verdicts: tuple[np.ndarray, np.ndarray] | None = None) -> float:
+    def fit(self, points: np.ndarray, s: int, verdicts: tuple[np.ndarray, np.ndarray] | None = None,
+            held: np.ndarray | None = None) -> float:
         """Share of (N, 3) world points [m] that the images at step s confirm and that lie on an
         observed surface (within the fine ICP radius of a fused point), less the share only seen
         through (module doc: the free-space test alone does not rank poses).  ``verdicts``: the
-        points' :meth:`verdicts` at s, if already made."""
+        points' :meth:`verdicts` at s, if already made.  ``held``: (N,) bool, points on a surface
+        another part holds, which count as on none (:func:`explained_by`)."""
         cons, viol = self.verdicts(points, s) if verdicts is None else verdicts
         on = self.full_tree(s).query(points, distance_upper_bound=ICP_FINE_VOXELS * self.voxel, workers=-1)[0] < np.inf
+        if held is not None:
+            on &= ~held
         return float(np.mean(cons.astype(bool) & on) - np.mean(viol))
 
     def solve_step(self, points: np.ndarray, s: int,
@@ -883,6 +891,7 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
     track failed: :func:`support`) or (None, None, []) (module doc, fragments)."""
     x = tracking_subset(frag.points)
     observed = observed_steps(frag)
+    surfaces = _Surfaces(tracker.voxel)
     best, best_fit, best_anchor, failed = None, -np.inf, None, []
     for k, p in enumerate(proposals):
         if p is frag:
@@ -902,19 +911,58 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
         # the images must not tell the two motions apart: at the steps the other track holds,
         # its motion puts the points on observed surfaces nearly as often as the fragment's own (a
         # drawer's points carried by the drawer above it hide in the body, uncontradicted, but
-        # on no surface)
-        if fit < fit_along(tracker, xa, frag, a, common[held]) - (1.0 - COMOVING_SHARE):
+        # on no surface).  A surface a larger proposal holds there witnesses neither motion: a
+        # fragment re-detected onto the fronts of drawers at rest sits on surfaces, but on theirs
+        # (the larger holds it, as merging goes smallest first: a part's surface is not lost to a
+        # fragment lying on it)
+        larger = [q for q in proposals if len(q.points) > len(frag.points)]
+        if (fit_along(tracker, xa, p, a, common[held], surfaces.held_by([q for q in larger if q is not p]))
+                < fit_along(tracker, xa, frag, a, common[held], surfaces.held_by(larger)) - (1.0 - COMOVING_SHARE)):
             continue
         best, best_fit, failed, best_anchor = k, fit, fails, a
     return best, best_anchor, failed
 
 
-def fit_along(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, steps: np.ndarray) -> float:
+class _Surfaces:
+    """KD-trees of proposals' tracking subsets per time step, built on first use; ``voxel``: the
+    cloud's voxel edge [m] (a point within the fine ICP radius of one lies on that surface)."""
+
+    def __init__(self, voxel: float):
+        self.radius = ICP_FINE_VOXELS * voxel
+        self._trees: dict[tuple[int, int], cKDTree | None] = {}
+
+    def _tree(self, p: Proposal, s: int) -> cKDTree | None:
+        key = (id(p), s)
+        if key not in self._trees:
+            at = p.points_at(s)
+            self._trees[key] = None if at is None else cKDTree(tracking_subset(at))
+        return self._trees[key]
+
+    def held_by(self, proposals: list[Proposal]) -> Callable[[np.ndarray, int], np.ndarray]:
+        """A function of (N, 3) world points and a step s: (N,) bool, on a surface one of
+        ``proposals`` holds at s."""
+        def held(points: np.ndarray, s: int) -> np.ndarray:
+            on = np.zeros(len(points), dtype=bool)
+            for p in proposals:
+                tree = self._tree(p, s)
+                if tree is not None:
+                    on |= tree.query(points, distance_upper_bound=self.radius, workers=-1)[0] < np.inf
+            return on
+        return held
+
+
+def fit_along(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, steps: np.ndarray,
+              held: Callable[[np.ndarray, int], np.ndarray] | None = None) -> float:
     """Mean over ``steps`` of :meth:`Tracker.fit` of (N, 3) world points at step ``anchor``
-    carried by ``by``'s motion (0 without steps)."""
+    carried by ``by``'s motion (0 without steps); ``held``: of carried points and a step, (N,)
+    bool, those on a surface another part holds there (counted as on none)."""
     if len(steps) == 0:
         return 0.0
-    return float(np.mean([tracker.fit(carried(by, anchor, int(s), points), int(s)) for s in steps]))
+    fits = []
+    for s in map(int, steps):
+        x = carried(by, anchor, s, points)
+        fits.append(tracker.fit(x, s, held=None if held is None else held(x, s)))
+    return float(np.mean(fits))
 
 
 def confirmed(tracker: Tracker, points: np.ndarray, by: Proposal, anchor: int, steps: np.ndarray) -> float:

@@ -60,8 +60,10 @@ class _Oracle(Tracker):
         on, seen_through = self._verdicts(points, s)
         return float(np.mean(on)), float(np.mean(seen_through))
 
-    def fit(self, points, s, verdicts=None):
+    def fit(self, points, s, verdicts=None, held=None):
         on, seen_through = self._verdicts(points, s)
+        if held is not None:
+            on = on & ~held
         return float(np.mean(on) - np.mean(seen_through))
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from kinemaforge_opt.spatial import transform_points
 from kinemaforge_opt.perception.track import (ICP_FINE_VOXELS, Proposal, Tracker, absorb, explained_by, explained_in_pieces,
                                               merge_fragments, static_explains)
 
@@ -287,3 +288,39 @@ def test_a_drawers_floor_joins_its_drawer_though_the_floor_confirms_the_other_dr
     assert explained_by(oracle, floor, [front_b, front_a, floor]) == (1, 6, [])
     merged = merge_fragments(oracle, [front_a, front_b, floor])
     assert [(p.name, len(p.points)) for p in merged] == [("front_a", len(fa) + len(floor_a)), ("front_b", len(fb))]
+
+
+class _HidingOracle(_Oracle):
+    """The oracle with the carcass hiding what is inside it from confirmation too: a shut drawer's
+    side wall is neither confirmed nor seen through."""
+
+    def verdicts(self, points, s):
+        on = self.trees[s].query(points, distance_upper_bound=ON_SURFACE)[0] < np.inf
+        inside = np.all((points > CARCASS[0]) & (points < CARCASS[1]), axis=1)
+        return (on & ~inside).astype(int), (~on & ~inside).astype(int)
+
+
+def test_a_wall_tracked_onto_another_drawers_front_while_its_own_is_shut_joins_its_drawer():
+    """A's side wall (hidden in the carcass while A is shut, steps 0-8) is tracked rightly while A
+    opens, but at the shut steps its track lies on B's front (a re-detection onto a part at rest,
+    turned a quarter turn): a surface, so its own motion puts it on surfaces there and A's does
+    not.  That surface is B's, held by B's proposal: it witnesses neither motion."""
+    (fa, wa), (fb, wb) = _drawer(0.05), _drawer(0.3)
+    ya, yb = _stroke(8), _stroke(0)  # A opens over steps 8-16, B over 0-8
+    shift = lambda pts, y: pts - np.array([0.0, y, 0.0])
+    surfaces = [np.concatenate([shift(fa, a), shift(wa, a), shift(fb, b), shift(wb, b)]) for a, b in zip(ya, yb)]
+    oracle = _HidingOracle(surfaces)
+    ref = 12
+    front_a = Proposal("front_a", ref, shift(fa, ya[ref]), _motion(ya, ref))
+    front_b = Proposal("front_b", 4, shift(fb, yb[4]), _motion(yb, 4))
+    track = _motion(ya, ref)
+    for s in range(9):  # the shut wall (x = -0.18) turned onto B's front: (x, y, z) -> (y - 0.2, -x - 0.18 - yb, z + 0.25)
+        onto_b = np.array([[0.0, 1.0, 0.0, -0.2], [-1.0, 0.0, 0.0, -0.18 - yb[s]], [0.0, 0.0, 1.0, 0.25], [0.0, 0.0, 0.0, 1.0]])
+        track[s] = onto_b @ _motion(ya, ref)[s]
+        np.testing.assert_allclose(cKDTree(shift(fb, yb[s])).query(transform_points(track[s], shift(wa, ya[ref])))[0], 0.0,
+                                   atol=1e-9)  # on B's front indeed
+    wall = Proposal("wall_a", ref, shift(wa, ya[ref])[: len(wa) // 2], track)  # its front half
+    assert explained_by(oracle, wall, [front_a, front_b, wall]) == (0, ref, [])
+    # with nothing holding B's front, the wall's own motion puts it on a surface A's does not
+    assert explained_by(oracle, wall, [front_a, wall]) == (None, None, [])
+    assert [p.name for p in merge_fragments(oracle, [front_a, front_b, wall])] == ["front_a", "front_b"]
