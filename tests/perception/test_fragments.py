@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from kinemaforge_opt.spatial import transform_points
 from kinemaforge_opt.perception.track import (ICP_FINE_VOXELS, Proposal, Tracker, absorb, explained_by, explained_in_pieces,
                                               merge_fragments, static_explains)
+from kinemaforge_opt.spatial import transform_points
 
 STEPS = 16
 CARCASS = (np.array([-0.2, 0.0, 0.0]), np.array([0.2, 0.4, 0.6]))  # box [m]; drawers pull along -y
@@ -301,10 +301,11 @@ class _HidingOracle(_Oracle):
 
 
 def test_a_wall_tracked_onto_another_drawers_front_while_its_own_is_shut_joins_its_drawer():
-    """A's side wall (hidden in the carcass while A is shut, steps 0-8) is tracked rightly while A
-    opens, but at the shut steps its track lies on B's front (a re-detection onto a part at rest,
-    turned a quarter turn): a surface, so its own motion puts it on surfaces there and A's does
-    not.  That surface is B's, held by B's proposal: it witnesses neither motion."""
+    """The front half of A's side wall (hidden in the carcass while A is shut, steps 0-8) is
+    tracked rightly while A opens, but at the shut steps its track lies on B's front (a
+    re-detection onto another drawer, turned a quarter turn): a surface, so its own motion puts it
+    on surfaces there and A's does not.  That surface is B's, held by B's larger proposal: it
+    witnesses neither motion."""
     (fa, wa), (fb, wb) = _drawer(0.05), _drawer(0.3)
     ya, yb = _stroke(8), _stroke(0)  # A opens over steps 8-16, B over 0-8
     shift = lambda pts, y: pts - np.array([0.0, y, 0.0])
