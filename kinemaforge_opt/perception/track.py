@@ -892,6 +892,7 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
     x = tracking_subset(frag.points)
     observed = observed_steps(frag)
     surfaces = _Surfaces(tracker.voxel)
+    larger = [q for q in proposals if len(q.points) > len(frag.points)]  # they hold their surfaces (below)
     best, best_fit, best_anchor, failed = None, -np.inf, None, []
     for k, p in enumerate(proposals):
         if p is frag:
@@ -915,7 +916,6 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
         # fragment re-detected onto the fronts of drawers at rest sits on surfaces, but on theirs
         # (the larger holds it, as merging goes smallest first: a part's surface is not lost to a
         # fragment lying on it)
-        larger = [q for q in proposals if len(q.points) > len(frag.points)]
         if (fit_along(tracker, xa, p, a, common[held], surfaces.held_by([q for q in larger if q is not p]))
                 < fit_along(tracker, xa, frag, a, common[held], surfaces.held_by(larger)) - (1.0 - COMOVING_SHARE)):
             continue
