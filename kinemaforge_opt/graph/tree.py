@@ -249,10 +249,10 @@ def _log(x: float) -> float:
     return float(np.log(x)) if x > 0 else IMPOSSIBLE_LOG
 
 
-def _travel(h: JointHypothesis) -> float:
-    """Total variation of the fitted joint value Σ|Δq| [m or rad]: how far the child moves
-    relative to the parent under this relation."""
-    return float(np.abs(np.diff(h.q)).sum())
+def _travel(h: JointHypothesis, times: np.ndarray) -> float:
+    """Total variation of the fitted joint value Σ|Δq| [m or rad] over the samples at ``times``
+    [s] (a subset of ``h.times``): how far the child moves relative to the parent there."""
+    return float(np.abs(np.diff(h.q[np.isin(h.times, times)])).sum())
 
 
 def _tree(root, parts, edges, arcs) -> KinematicTree:
@@ -317,14 +317,18 @@ def _carrier(edges, anc: str, parent: str, child: str, held: JointHypothesis) ->
     ancestor that is not clearly worse: residual RMS within SIGNIFICANCE times the parent's
     (floored at SIGMA_FLOOR's) and orientations not clearly worse (:func:`_turns_worse`; a hinge
     fitted from the base to a folding door's second leaf leaves its turn unexplained, and its q
-    says nothing)."""
+    says nothing).  The travels are summed over the samples all three fits share: a parent
+    tracked over part of the recording sees less of the child's travel than the ancestor does
+    (protocol_drawer_1@s7: a drawer's track lost when it is pulled would carry the two drawers
+    whose coast after it only the body sees)."""
     if held.type == "rigid" or (anc, parent) not in edges or _best_type(edges[(anc, parent)]).type != held.type:
         return None
     same, own = edges[(anc, child)][held.type], edges[(anc, parent)][held.type]
     misfits = same.residual_rms > SIGNIFICANCE * max(held.residual_rms, np.sqrt(3.0) * SIGMA_FLOOR)
     if misfits or _turns_worse(same, held):
         return None
-    difference, margin = _travel(same) - _travel(held), 0.5 * _travel(own)
+    shared = np.intersect1d(np.intersect1d(same.times, held.times), own.times)
+    difference, margin = _travel(same, shared) - _travel(held, shared), 0.5 * _travel(own, shared)
     return "anc" if difference < -margin else "parent" if difference > margin else None
 
 
