@@ -231,12 +231,17 @@ def _part_edges(tracks, fits, parts):
 def _parent_bic(best: dict[str, JointHypothesis]) -> dict[str, float]:
     """BIC of each candidate parent's best relation on a *common* scale for the child: the
     σ and effective sample fraction of the child's best-explained pair (per-pair scaling would
-    normalise a bad parent's misfit away)."""
+    normalise a bad parent's misfit away), and the sample count of the candidate that shares the
+    most samples with the child, each fit's misfit and latent joint values taken per sample (a
+    parent tracked over part of the recording would otherwise win by the samples it lacks:
+    protocol_drawer_1@s7's drawer lost when pulled, against the body, for the drawer coasting
+    back after it)."""
     ref = min(best.values(), key=lambda h: max(h.residual_rms, np.sqrt(3.0) * h.noise_sigma))
     sigma2 = max(ref.residual_rms**2 / 3.0, ref.noise_sigma**2)
     s = max((1.0 - float(np.clip(ref.residual_autocorr, 0.0, 1.0))) / (1.0 + max(ref.residual_autocorr, 0.0)), 1.0 / ref.n_samples)
+    n = max(h.n_samples for h in best.values())
     return {
-        pa: s * h.n_samples * h.residual_rms**2 / sigma2 + (h.n_params + s * h.n_latent) * np.log(h.n_samples)
+        pa: s * n * h.residual_rms**2 / sigma2 + (h.n_params + s * n * h.n_latent / h.n_samples) * np.log(n)
         for pa, h in best.items()
     }
 
