@@ -6,7 +6,8 @@ every joint type; a position-only track cannot be a parent (forbidden edge: a po
 
 Edge confidence ρ(i→j, type) = P(parent = i | j) · P(type | i, j): the type posterior from
 :mod:`graph.score` and a parent posterior exp(−BIC*/2) normalised over j's candidate parents
-(BIC* = the pair's best type).  Both are kept in log space.
+(BIC* = the pair's best type, on one scale for all of them: misfit per sample, one sample count,
+as a parent observed at fewer steps shares fewer of j's samples).  Both are kept in log space.
 
 Tracks joined by a confident rigid edge (rigid posterior ≥ MERGE_PROBABILITY and rigid residual
 within SIGNIFICANCE·σ of the noise) are merged first
@@ -231,11 +232,11 @@ def _part_edges(tracks, fits, parts):
 def _parent_bic(best: dict[str, JointHypothesis]) -> dict[str, float]:
     """BIC of each candidate parent's best relation on a *common* scale for the child: the
     σ and effective sample fraction of the child's best-explained pair (per-pair scaling would
-    normalise a bad parent's misfit away), and the sample count of the candidate that shares the
-    most samples with the child, each fit's misfit and latent joint values taken per sample (a
-    parent tracked over part of the recording would otherwise win by the samples it lacks:
-    protocol_drawer_1@s7's drawer lost when pulled, against the body, for the drawer coasting
-    back after it)."""
+    normalise a bad parent's misfit away), and one sample count: each fit's misfit and latent
+    joint values per sample, times the most samples any candidate shares with the child (summed
+    over its own samples, a parent tracked over part of the recording wins by the samples it
+    lacks: protocol_drawer_1@s7's drawer, lost when pulled, took the body's place as the parent
+    of the drawers coasting back after it)."""
     ref = min(best.values(), key=lambda h: max(h.residual_rms, np.sqrt(3.0) * h.noise_sigma))
     sigma2 = max(ref.residual_rms**2 / 3.0, ref.noise_sigma**2)
     s = max((1.0 - float(np.clip(ref.residual_autocorr, 0.0, 1.0))) / (1.0 + max(ref.residual_autocorr, 0.0)), 1.0 / ref.n_samples)
