@@ -305,10 +305,11 @@ def test_a_drawer_lost_when_pulled_does_not_carry_the_one_coasting_after(seed):
 
 
 def test_a_parent_tracked_over_part_of_the_recording_is_judged_by_travel_on_shared_samples():
-    """The same drawers: drawer B travels 25 + 10 cm relative to the body but 25 cm relative to
-    drawer A, only because drawer A is not seen while B coasts back.  On the samples all three
-    fits share, the travels differ by no more than drawer A's own 2-cm travel: the travel does
-    not say drawer A carries B (before, it did, and the chain stayed whatever the fits said)."""
+    """The same drawers: drawer B travels 25 + 10 cm relative to the body but about 25 + 2 cm
+    relative to drawer A, only because drawer A is not seen while B coasts back.  On the samples
+    all three fits share, the two travels differ by about drawer A's own 2-cm travel, no more:
+    the travel does not say drawer A carries B (summed over each fit's own samples it did, and
+    the chain stayed whatever the fits said)."""
     tracks = _drawer_lost_when_pulled(np.random.default_rng(0))
     names = ("world",) + tracks.names
     edges = {(names[0] if i is None else tracks.names[i], tracks.names[j]): score_pair(fit_all(relative_motion(tracks, i, j)))
