@@ -13,10 +13,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from kinemaforge_opt.graph import infer_tree
-from kinemaforge_opt.graph.fit import JointHypothesis, fit_all
-from kinemaforge_opt.graph.motion import relative_motion
-from kinemaforge_opt.graph.score import closeness_z, score_pair
-from kinemaforge_opt.graph.tree import _arborescences, _carrier, _graph_trees
+from kinemaforge_opt.graph.fit import JointHypothesis
+from kinemaforge_opt.graph.motion import WORLD
+from kinemaforge_opt.graph.score import closeness_z
+from kinemaforge_opt.graph.tree import _arborescences, _carrier, _graph_trees, _pair_fits
 from kinemaforge_opt.io.tracks import PoseTracks
 from kinemaforge_opt.spatial import axis_angle_error, make_transform, screw_motion, translation_motion
 
@@ -310,9 +310,6 @@ def test_a_parent_tracked_over_part_of_the_recording_is_judged_by_travel_on_shar
     all three fits share, the two travels differ by about drawer A's own 2-cm travel, no more:
     the travel does not say drawer A carries B (summed over each fit's own samples it did, and
     the chain stayed whatever the fits said)."""
-    tracks = _drawer_lost_when_pulled(np.random.default_rng(0))
-    names = ("world",) + tracks.names
-    edges = {(names[0] if i is None else tracks.names[i], tracks.names[j]): score_pair(fit_all(relative_motion(tracks, i, j)))
-             for i, j in ((None, 1), (None, 2), (1, 2))}
+    edges = _pair_fits(_drawer_lost_when_pulled(np.random.default_rng(0)))
     held = edges[("drawer_a", "drawer_b")]["prismatic"]
-    assert _carrier(edges, "world", "drawer_a", "drawer_b", held) != "parent"
+    assert _carrier(edges, WORLD, "drawer_a", "drawer_b", held) != "parent"
