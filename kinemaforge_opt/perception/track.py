@@ -822,15 +822,10 @@ def without_unions(tracker: Tracker, proposals: list[Proposal], seeds: dict[str,
     piece seeded at the union's own step is a leftover of the parts its seed spans, which the
     kept proposals track: it does not return (a drawer's side wall sliding along it would come
     back as a joint of its own, docs/NOTES.md)."""
-    fine = ICP_FINE_VOXELS * tracker.voxel
+    surfaces = _Surfaces(tracker.voxel, subset=False)
 
     def covered(seed: np.ndarray, ref: int, steps: int, by: list[Proposal]) -> bool:
-        hit = np.zeros(len(seed), dtype=bool)
-        for q in by:
-            moved = q.points_at(ref) if observed_steps(q) >= steps else None
-            if moved is not None:
-                hit |= cKDTree(moved).query(seed, distance_upper_bound=fine, workers=-1)[0] < np.inf
-        return bool(hit.mean() >= COMOVING_SHARE)
+        return bool(surfaces.held_by([q for q in by if observed_steps(q) >= steps])(seed, ref).mean() >= COMOVING_SHARE)
 
     out, dropped = list(proposals), []
     for k, p in enumerate(proposals):
@@ -924,18 +919,20 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
 
 
 class _Surfaces:
-    """KD-trees of proposals' tracking subsets per time step, built on first use; ``voxel``: the
-    cloud's voxel edge [m] (a point within the fine ICP radius of one lies on that surface)."""
+    """KD-trees of proposals' moved points per time step (``subset``: their tracking subsets),
+    built on first use; ``voxel``: the cloud's voxel edge [m] (a point within the fine ICP radius
+    of one lies on that surface)."""
 
-    def __init__(self, voxel: float):
+    def __init__(self, voxel: float, subset: bool = True):
         self.radius = ICP_FINE_VOXELS * voxel
+        self.subset = subset
         self._trees: dict[tuple[int, int], cKDTree | None] = {}
 
     def _tree(self, p: Proposal, s: int) -> cKDTree | None:
         key = (id(p), s)
         if key not in self._trees:
             at = p.points_at(s)
-            self._trees[key] = None if at is None else cKDTree(tracking_subset(at))
+            self._trees[key] = None if at is None else cKDTree(tracking_subset(at) if self.subset else at)
         return self._trees[key]
 
     def held_by(self, proposals: list[Proposal]) -> Callable[[np.ndarray, int], np.ndarray]:
@@ -1063,8 +1060,8 @@ def coincident_with(tracker: Tracker, q: Proposal, proposals: list[Proposal]) ->
     (module doc, duplicates): at COMOVING_SHARE of the steps both observe — themselves
     COMOVING_SHARE of ``q``'s observed steps — at least COMOVING_SHARE of ``q``'s points lie
     within the fine ICP radius of the other's; of several, the one covered at most steps."""
-    fine = ICP_FINE_VOXELS * tracker.voxel
     x = tracking_subset(q.points)
+    surfaces = _Surfaces(tracker.voxel, subset=False)
     best, best_share, anchor = None, 0.0, None
     for k, p in enumerate(proposals):
         if p is q:
@@ -1072,11 +1069,8 @@ def coincident_with(tracker: Tracker, q: Proposal, proposals: list[Proposal]) ->
         common, a = _common_anchor(q, p)
         if common.size < max(COMOVING_SHARE * observed_steps(q), 2):
             continue
-        covered = 0
-        for s in common:
-            moved = transform_points(q.Ts_delta[s], x)
-            on = cKDTree(p.points_at(int(s))).query(moved, distance_upper_bound=fine, workers=-1)[0] < np.inf
-            covered += on.mean() >= COMOVING_SHARE
+        on_p = surfaces.held_by([p])
+        covered = sum(on_p(transform_points(q.Ts_delta[s], x), int(s)).mean() >= COMOVING_SHARE for s in common)
         share = covered / common.size
         if share >= COMOVING_SHARE and share > best_share:
             best, best_share, anchor = k, share, a
