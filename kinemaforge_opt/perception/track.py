@@ -919,21 +919,27 @@ def explained_by(tracker: Tracker, frag: Proposal, proposals: list[Proposal]) ->
 
 
 class _Surfaces:
-    """KD-trees of proposals' moved points per time step (``subset``: their tracking subsets),
-    built on first use; ``voxel``: the cloud's voxel edge [m] (a point within the fine ICP radius
-    of one lies on that surface)."""
+    """Whether points lie on proposals' surfaces at a time step: within the fine ICP radius of a
+    proposal's moved points (``subset``: of its tracking subset); ``voxel``: the cloud's voxel
+    edge [m].  A rigid motion keeps distances, so the points are carried back to the proposal's
+    reference pose instead, against one KD-tree of its points per proposal, built on first use
+    (the proposal is kept with it, so its id is not reused by another while the cache lives)."""
 
     def __init__(self, voxel: float, subset: bool = True):
         self.radius = ICP_FINE_VOXELS * voxel
         self.subset = subset
-        self._trees: dict[tuple[int, int], cKDTree | None] = {}
+        self._trees: dict[int, tuple[Proposal, cKDTree]] = {}
 
-    def _tree(self, p: Proposal, s: int) -> cKDTree | None:
-        key = (id(p), s)
-        if key not in self._trees:
-            at = p.points_at(s)
-            self._trees[key] = None if at is None else cKDTree(tracking_subset(at) if self.subset else at)
-        return self._trees[key]
+    def on(self, points: np.ndarray, p: Proposal, s: int) -> np.ndarray:
+        """(N,) bool: which of (N, 3) world points lie on ``p``'s surface at step s (none where
+        ``p`` is unobserved)."""
+        T = p.Ts_delta[s]
+        if not np.all(np.isfinite(T)):
+            return np.zeros(len(points), dtype=bool)
+        if id(p) not in self._trees:
+            self._trees[id(p)] = (p, cKDTree(tracking_subset(p.points) if self.subset else p.points))
+        back = transform_points(np.linalg.inv(T), points)
+        return self._trees[id(p)][1].query(back, distance_upper_bound=self.radius, workers=-1)[0] < np.inf
 
     def held_by(self, proposals: list[Proposal]) -> Callable[[np.ndarray, int], np.ndarray]:
         """A function of (N, 3) world points and a step s: (N,) bool, on a surface one of
@@ -941,9 +947,7 @@ class _Surfaces:
         def held(points: np.ndarray, s: int) -> np.ndarray:
             on = np.zeros(len(points), dtype=bool)
             for p in proposals:
-                tree = self._tree(p, s)
-                if tree is not None:
-                    on |= tree.query(points, distance_upper_bound=self.radius, workers=-1)[0] < np.inf
+                on |= self.on(points, p, s)
             return on
         return held
 
@@ -1069,8 +1073,7 @@ def coincident_with(tracker: Tracker, q: Proposal, proposals: list[Proposal]) ->
         common, a = _common_anchor(q, p)
         if common.size < max(COMOVING_SHARE * observed_steps(q), 2):
             continue
-        on_p = surfaces.held_by([p])
-        covered = sum(on_p(transform_points(q.Ts_delta[s], x), int(s)).mean() >= COMOVING_SHARE for s in common)
+        covered = sum(surfaces.on(transform_points(q.Ts_delta[s], x), p, int(s)).mean() >= COMOVING_SHARE for s in common)
         share = covered / common.size
         if share >= COMOVING_SHARE and share > best_share:
             best, best_share, anchor = k, share, a
