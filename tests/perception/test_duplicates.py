@@ -118,3 +118,33 @@ def test_a_neighbouring_drawer_is_no_duplicate():
     assert coincident_with(oracle, rest, [true, rest]) == (None, None)
     assert coincident_with(oracle, true, [true, rest]) == (None, None)
     assert [p.name for p in merge_fragments(oracle, [true, rest])] == ["true", "other"]
+
+
+def test_the_surface_test_carries_points_back_along_the_part_s_motion():
+    """`_Surfaces.on` (points carried back to the proposal's reference pose against one tree) says
+    what a KD-tree of the proposal's moved points says at every step: on a door turning about a
+    hinge, points just off its moved face are on it, points a few radii off are not, and none is
+    on it where it is unobserved."""
+    from scipy.spatial.transform import Rotation
+
+    from kinemaforge_opt.perception.track import _Surfaces
+
+    voxel = 0.01
+    radius = ICP_FINE_VOXELS * voxel
+    Ts = np.tile(np.eye(4), (STEPS, 1, 1))
+    for s in range(STEPS):  # 6 degrees a step about the hinge line x = -0.19, y = 0 (vertical)
+        R = Rotation.from_rotvec([0.0, 0.0, np.radians(6.0 * (s - REF))]).as_matrix()
+        Ts[s, :3, :3], Ts[s, :3, 3] = R, np.array([-0.19, 0.0, 0.0]) - R @ np.array([-0.19, 0.0, 0.0])
+    Ts[7] = np.nan
+    door = Proposal("door", REF, _front(0.0), Ts)
+    rng = np.random.default_rng(3)
+    surfaces = _Surfaces(voxel, subset=False)
+    for s in range(STEPS):
+        moved = door.points_at(s)
+        if moved is None:
+            assert not surfaces.on(_front(0.0), door, s).any()
+            continue
+        probe = moved[rng.choice(len(moved), 200)] + rng.normal(0.0, 2.0 * radius / 3.0, (200, 3))
+        truth = cKDTree(moved).query(probe, distance_upper_bound=radius)[0] < np.inf
+        assert 0 < truth.sum() < len(probe)  # both kinds of point are probed
+        np.testing.assert_array_equal(surfaces.on(probe, door, s), truth)
