@@ -1073,7 +1073,8 @@ def coincident_with(tracker: Tracker, q: Proposal, proposals: list[Proposal]) ->
         common, a = _common_anchor(q, p)
         if common.size < max(COMOVING_SHARE * observed_steps(q), 2):
             continue
-        covered = sum(surfaces.on(transform_points(q.Ts_delta[s], x), p, int(s)).mean() >= COMOVING_SHARE for s in common)
+        covered = sum(surfaces.on(transform_points(q.Ts_delta[s], x), p, int(s)).mean() >= COMOVING_SHARE
+                      for s in common)
         share = covered / common.size
         if share >= COMOVING_SHARE and share > best_share:
             best, best_share, anchor = k, share, a
