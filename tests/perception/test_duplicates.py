@@ -125,16 +125,14 @@ def test_the_surface_test_carries_points_back_along_the_part_s_motion():
     what a KD-tree of the proposal's moved points says at every step: on a door turning about a
     hinge, points just off its moved face are on it, points a few radii off are not, and none is
     on it where it is unobserved."""
-    from scipy.spatial.transform import Rotation
-
     from kinemaforge_opt.perception.track import _Surfaces
+    from kinemaforge_opt.spatial import screw_motion
 
     voxel = 0.01
     radius = ICP_FINE_VOXELS * voxel
-    Ts = np.tile(np.eye(4), (STEPS, 1, 1))
-    for s in range(STEPS):  # 6 degrees a step about the hinge line x = -0.19, y = 0 (vertical)
-        R = Rotation.from_rotvec([0.0, 0.0, np.radians(6.0 * (s - REF))]).as_matrix()
-        Ts[s, :3, :3], Ts[s, :3, 3] = R, np.array([-0.19, 0.0, 0.0]) - R @ np.array([-0.19, 0.0, 0.0])
+    # 6 degrees a step about the vertical hinge line x = -0.19, y = 0
+    Ts = np.stack([screw_motion(np.array([0.0, 0.0, 1.0]), np.array([-0.19, 0.0, 0.0]), np.radians(6.0 * (s - REF)))
+                   for s in range(STEPS)])
     Ts[7] = np.nan
     door = Proposal("door", REF, _front(0.0), Ts)
     rng = np.random.default_rng(3)
